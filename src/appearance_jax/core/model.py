@@ -1,0 +1,83 @@
+"""The model protocol: what every BSDF, BCSDF and phase function module exposes.
+
+A model module defines pure kernels ``_eval(params, wi, wo)``, ``_sample(params, wi, u)``
+and ``_pdf(params, wi, wo)`` and publishes them through :func:`boundary`, which validates
+the parameters eagerly and then calls the jitted kernel. The module ends with a
+:class:`Model` record that the registry (``appearance_jax.registry``) lists.
+
+Signatures (directions are unit :class:`~appearance_jax.core.vec.Vec3` pointing away from
+the scattering point, in the local frame of :mod:`appearance_jax.core.frame`):
+
+- ``eval(params, wi, wo) -> f``: shape ``wi.shape + (n_bands,)``, in 1/sr.
+- ``sample(params, wi, u_or_key) -> (wo, weight, pdf)``: ``weight = f |cos theta_o| / pdf``
+  (bands axis; for phase functions ``f / pdf``), ``pdf`` in 1/sr (shape ``wi.shape``).
+  Failed samples have ``weight = 0`` and ``pdf = 0``.
+- ``pdf(params, wi, wo) -> pdf``: shape ``wi.shape``.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+import jax
+import jax.numpy as jnp
+
+from .params import validate
+
+
+def boundary(kernel: Callable, params_cls: type, static_argnames: tuple[str, ...] = ()) -> Callable:
+    """Public entry point of a kernel: eager validation of ``params`` + one ``jit``.
+
+    Inside a user's own ``jit``/``grad`` the parameters are traced and the check is
+    skipped; the kernel itself never branches on parameter values.
+    """
+    jitted = jax.jit(kernel, static_argnames=static_argnames)
+
+    @functools.wraps(kernel)
+    def public(params, *args, **kwargs):
+        validate(params, params_cls)
+        return jitted(params, *args, **kwargs)
+
+    public.kernel = kernel  # the unvalidated, unjitted kernel, for composition
+    return public
+
+
+def band_axis(*values) -> jax.Array:
+    """Broadcast band-valued parameters to a common trailing axis (at least length 1)."""
+    shapes = [jnp.shape(v) for v in values]
+    shape = jnp.broadcast_shapes(*shapes) if shapes else ()
+    return shape if len(shape) else (1,)
+
+
+def with_bands(x) -> jax.Array:
+    """Give a per-direction array a trailing singleton bands axis to broadcast against bands."""
+    return jnp.asarray(x)[..., None]
+
+
+def as_bands(v) -> jax.Array:
+    """A band-valued parameter with at least one trailing axis."""
+    return jnp.atleast_1d(jnp.asarray(v))
+
+
+@dataclass(frozen=True)
+class Model:
+    """Registry record of a model. ``eval``/``sample``/``pdf`` are the validated public functions."""
+
+    name: str
+    kind: str  # "bsdf" | "phase" | "bcsdf"
+    Params: type
+    eval: Callable
+    sample: Callable | None
+    pdf: Callable | None
+    summary: str
+    source: str
+    reciprocal: bool = True
+    # True when wo ranges over the whole sphere (transmission / phase functions)
+    transmissive: bool = False
+    presets: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if self.kind not in ("bsdf", "phase", "bcsdf"):
+            raise ValueError(f"Model.kind = {self.kind!r}: must be 'bsdf', 'phase' or 'bcsdf'")

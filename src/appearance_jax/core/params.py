@@ -1,0 +1,187 @@
+"""Parameter pytrees with metadata (bounds, unit, meaning) and eager validation.
+
+A model's ``Params`` is a frozen dataclass registered as a JAX pytree. Each numeric field is
+declared with :func:`param`, which records its default, valid range, unit and a one-line
+meaning; configuration that selects code paths (the microfacet distribution, say) is
+declared with :func:`static` and is not a pytree leaf.
+
+Shapes: a field declared ``bands=True`` may carry a trailing bands axis (RGB or
+wavelengths) that broadcasts against the model's output bands; other fields broadcast
+against the direction arrays. Both may have leading axes for spatially varying parameters.
+
+Validation (:func:`validate`) runs eagerly at the public boundary of every model: a
+concrete value that is NaN, infinite or out of range raises a ``ValueError`` that names the
+class, the field, the value and the valid range. Traced values (inside the user's ``jit``)
+are skipped, so kernels stay branch-free.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+_META_KEY = "appearance_jax"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Metadata of one numeric parameter."""
+
+    lo: float = -math.inf
+    hi: float = math.inf
+    lo_open: bool = False
+    hi_open: bool = False
+    unit: str = "1"
+    doc: str = ""
+    bands: bool = False
+
+    def range_str(self) -> str:
+        left = "(" if self.lo_open or self.lo == -math.inf else "["
+        right = ")" if self.hi_open or self.hi == math.inf else "]"
+        return f"{left}{_fmt(self.lo)}, {_fmt(self.hi)}{right}"
+
+    def contains(self, v: np.ndarray) -> np.ndarray:
+        ok = (v > self.lo) if self.lo_open else (v >= self.lo)
+        ok &= (v < self.hi) if self.hi_open else (v <= self.hi)
+        return ok
+
+
+@dataclass(frozen=True)
+class StaticSpec:
+    """Metadata of a static (non-differentiable, code-path selecting) field."""
+
+    choices: tuple | None = None
+    doc: str = ""
+
+
+def _fmt(x: float) -> str:
+    if x == math.inf:
+        return "inf"
+    if x == -math.inf:
+        return "-inf"
+    return f"{x:g}"
+
+
+def param(default, *, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, unit="1", doc="", bands=False):
+    """Declare a numeric parameter field (a pytree leaf) with its range and unit."""
+    spec = ParamSpec(float(lo), float(hi), lo_open, hi_open, unit, doc, bands)
+    return dataclasses.field(default=default, metadata={_META_KEY: spec})
+
+
+def static(default, *, choices=None, doc=""):
+    """Declare a static configuration field (hashable; not a pytree leaf)."""
+    spec = StaticSpec(tuple(choices) if choices is not None else None, doc)
+    return dataclasses.field(default=default, metadata={_META_KEY: spec})
+
+
+def _to_array(v):
+    """Convert python / numpy numbers to jax arrays; leave arrays, tracers, others alone."""
+    if isinstance(v, (bool, int, float, tuple, list, np.ndarray, np.generic)):
+        return jnp.asarray(v, dtype=jnp.result_type(float))
+    return v
+
+
+def params_class(cls):
+    """Class decorator: frozen dataclass + pytree registration + conversions.
+
+    Numeric fields given as python numbers, tuples or numpy arrays are converted to jax
+    arrays of the default float dtype; static fields are checked against their choices.
+    """
+    dc = dataclass(frozen=True)(cls)
+    data, meta = [], []
+    for f in dataclasses.fields(dc):
+        spec = f.metadata.get(_META_KEY)
+        (meta if isinstance(spec, StaticSpec) else data).append(f.name)
+    user_post_init = getattr(dc, "__post_init__", None)
+
+    def __post_init__(self):
+        for name in data:
+            object.__setattr__(self, name, _to_array(getattr(self, name)))
+        for name in meta:
+            spec = dc.__dataclass_fields__[name].metadata[_META_KEY]
+            v = getattr(self, name)
+            if spec.choices is not None and v not in spec.choices:
+                raise ValueError(
+                    f"{dc.__name__}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"
+                )
+        if user_post_init is not None:
+            user_post_init(self)
+
+    dc.__post_init__ = __post_init__
+    dc._data_fields = tuple(data)
+    dc._static_fields = tuple(meta)
+    dc.replace = lambda self, **kw: dataclasses.replace(self, **kw)
+    jax.tree_util.register_dataclass(dc, data_fields=data, meta_fields=meta)
+    return dc
+
+
+def param_specs(params_or_cls) -> dict[str, ParamSpec | StaticSpec]:
+    """Field name -> spec, in declaration order."""
+    cls = params_or_cls if isinstance(params_or_cls, type) else type(params_or_cls)
+    return {f.name: f.metadata[_META_KEY] for f in dataclasses.fields(cls) if _META_KEY in f.metadata}
+
+
+def is_params(obj) -> bool:
+    return dataclasses.is_dataclass(obj) and hasattr(type(obj), "_data_fields")
+
+
+def _is_traced(v) -> bool:
+    return isinstance(v, jax.core.Tracer)
+
+
+def validate(params, expected_cls: type | None = None) -> None:
+    """Raise ``ValueError`` if any concrete numeric field is non-finite or out of range.
+
+    Traced values are skipped (checks happen eagerly, at the public boundary).
+    Classes may add cross-field checks in a ``_validate(self)`` method that raises.
+    """
+    if expected_cls is not None and not isinstance(params, expected_cls):
+        raise TypeError(
+            f"expected parameters of type {expected_cls.__qualname__}, got {type(params).__qualname__}"
+        )
+    cls = type(params)
+    for name, spec in param_specs(cls).items():
+        if not isinstance(spec, ParamSpec):
+            continue
+        v = getattr(params, name)
+        if _is_traced(v):
+            continue
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"{cls.__name__}.{name} = {v!r} is not numeric") from e
+        bad = ~np.isfinite(a) | ~spec.contains(a)
+        if np.any(bad):
+            first = a[bad].flat[0] if a.ndim else a
+            what = "is not finite; valid range" if not np.isfinite(first) else "is outside the valid range"
+            raise ValueError(
+                f"{cls.__name__}.{name} = {float(first):g} {what} {spec.range_str()}"
+                + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
+                + (f" ({spec.doc})" if spec.doc else "")
+            )
+    extra = getattr(params, "_validate", None)
+    if extra is not None and not any(_is_traced(getattr(params, n)) for n in cls._data_fields):
+        extra()
+
+
+def describe(params_or_cls) -> list[dict[str, Any]]:
+    """Rows of the parameter table: name, default, range, unit, meaning (for the CLI and docs)."""
+    cls = params_or_cls if isinstance(params_or_cls, type) else type(params_or_cls)
+    rows = []
+    for f in dataclasses.fields(cls):
+        spec = f.metadata.get(_META_KEY)
+        default = f.default if f.default is not dataclasses.MISSING else None
+        if isinstance(spec, ParamSpec):
+            rows.append(dict(name=f.name, default=default, range=spec.range_str(), unit=spec.unit,
+                             doc=spec.doc, bands=spec.bands))
+        elif isinstance(spec, StaticSpec):
+            rows.append(dict(name=f.name, default=default,
+                             range="{" + ", ".join(map(str, spec.choices)) + "}" if spec.choices else "static",
+                             unit="-", doc=spec.doc, bands=False))
+    return rows

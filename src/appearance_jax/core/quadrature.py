@@ -1,0 +1,35 @@
+"""Gauss-Legendre quadrature on intervals and product rules on the (hemi)sphere."""
+
+from __future__ import annotations
+
+import numpy as np
+import jax.numpy as jnp
+
+from .frame import spherical_direction
+
+
+def gauss_legendre(n: int, a: float = -1.0, b: float = 1.0):
+    """Nodes and weights of the n-point Gauss-Legendre rule on [a, b] (numpy float64).
+
+    Exact for polynomials of degree <= 2n - 1.
+    """
+    if n < 1:
+        raise ValueError(f"gauss_legendre: n = {n} must be >= 1")
+    x, w = np.polynomial.legendre.leggauss(int(n))
+    half = 0.5 * (b - a)
+    return half * x + 0.5 * (a + b), half * w
+
+
+def sphere_rule(n_theta: int, n_phi: int, hemisphere: bool = False):
+    """Product rule over directions: Gauss-Legendre in cos(theta), uniform midpoints in phi.
+
+    Returns ``(w, weight)`` with ``w`` a Vec3 of shape ``(n_theta * n_phi,)`` and weights
+    summing to 4 pi (2 pi for the upper hemisphere). Integrates ``f(w) dw``.
+    """
+    mu, wmu = gauss_legendre(n_theta, 0.0 if hemisphere else -1.0, 1.0)
+    phi = (np.arange(n_phi) + 0.5) * (2.0 * np.pi / n_phi)
+    MU, PHI = np.meshgrid(mu, phi, indexing="ij")
+    W = np.repeat(wmu[:, None] * (2.0 * np.pi / n_phi), n_phi, axis=1)
+    theta = np.arccos(np.clip(MU, -1.0, 1.0))
+    d = spherical_direction(jnp.asarray(theta.ravel()), jnp.asarray(PHI.ravel()))
+    return d, jnp.asarray(W.ravel())

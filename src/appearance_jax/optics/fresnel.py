@@ -1,0 +1,148 @@
+"""Fresnel equations: dielectric (s/p amplitudes, reflectance, TIR), conductor, Schlick.
+
+Conventions (M09 of the Padrón 2025 spec; Born & Wolf): light goes from medium i to
+medium t; ``cos_i`` is the cosine of the incident angle with the interface normal on the
+incident side; ``eta`` is the *relative* index eta_t / eta_i. Amplitudes are signed
+(no separate pi phase jumps are needed anywhere downstream):
+
+    r_s = (eta_i c_i - eta_t c_t) / (eta_i c_i + eta_t c_t)
+    r_p = (eta_t c_i - eta_i c_t) / (eta_t c_i + eta_i c_t)
+    t_s = 2 eta_i c_i / (eta_i c_i + eta_t c_t)
+    t_p = 2 eta_i c_i / (eta_t c_i + eta_i c_t)
+
+The unpolarised reflectance is F = (|r_s|^2 + |r_p|^2) / 2; F = 1 under total internal
+reflection; the transmitted power is T = 1 - F.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+from ..core.special import safe_sqrt
+
+
+def snell_cos_t(cos_i, eta):
+    """cos of the refraction angle (>= 0) and a validity flag (False under TIR).
+
+    ``cos_i`` >= 0 and ``eta`` = eta_t / eta_i. Under TIR cos_t is returned as 0.
+    """
+    sin2_t = (1.0 - cos_i * cos_i) / (eta * eta)
+    valid = sin2_t <= 1.0
+    return safe_sqrt(1.0 - sin2_t), valid
+
+
+def fresnel_dielectric_amplitudes(cos_i, eta):
+    """Signed real amplitudes ``(r_s, r_p, t_s, t_p)`` for 0 <= cos_i <= 1.
+
+    Valid below the critical angle; under TIR the reflection amplitudes are returned with
+    modulus 1 (the phase is dropped; use :func:`fresnel_amplitudes_complex` for it) and
+    the transmission amplitudes are 0.
+    """
+    cos_t, valid = snell_cos_t(cos_i, eta)
+    # eta_i = 1, eta_t = eta (amplitudes only depend on the ratio)
+    ds = cos_i + eta * cos_t
+    dp = eta * cos_i + cos_t
+    ds = jnp.where(ds > 0, ds, 1.0)
+    dp = jnp.where(dp > 0, dp, 1.0)
+    r_s = jnp.where(valid, (cos_i - eta * cos_t) / ds, 1.0)
+    r_p = jnp.where(valid, (eta * cos_i - cos_t) / dp, 1.0)
+    t_s = jnp.where(valid, 2.0 * cos_i / ds, 0.0)
+    t_p = jnp.where(valid, 2.0 * cos_i / dp, 0.0)
+    return r_s, r_p, t_s, t_p
+
+
+def fresnel_amplitudes_complex(cos_i, eta_i, eta_t):
+    """Complex amplitudes ``(r_s, r_p, t_s, t_p, cos_t)`` for complex indices.
+
+    ``eta_i`` and ``eta_t`` may be complex (n + i k, absorbing media). cos_t is the complex
+    principal-branch sqrt(1 - (eta_i/eta_t)^2 (1 - cos_i^2)), which also gives the
+    evanescent solution (|r| = 1) under total internal reflection.
+    """
+    cos_i = jnp.asarray(cos_i).astype(jnp.result_type(cos_i, jnp.complex64))
+    eta_i = jnp.asarray(eta_i) + 0j
+    eta_t = jnp.asarray(eta_t) + 0j
+    ratio = eta_i / eta_t
+    cos_t = jnp.sqrt(1.0 - ratio * ratio * (1.0 - cos_i * cos_i))
+    ds = eta_i * cos_i + eta_t * cos_t
+    dp = eta_t * cos_i + eta_i * cos_t
+    r_s = (eta_i * cos_i - eta_t * cos_t) / ds
+    r_p = (eta_t * cos_i - eta_i * cos_t) / dp
+    t_s = 2.0 * eta_i * cos_i / ds
+    t_p = 2.0 * eta_i * cos_i / dp
+    return r_s, r_p, t_s, t_p, cos_t
+
+
+def fresnel_dielectric(cos_i, eta):
+    """Unpolarised dielectric reflectance for a signed ``cos_i`` (either side).
+
+    ``eta`` = eta_inside / eta_outside, where "outside" is the side the normal points to.
+    A negative ``cos_i`` means the light arrives from inside: the ratio is inverted.
+
+    Returns ``(F, cos_t, eta_it, eta_ti)`` with ``cos_t`` the signed cosine of the
+    transmitted direction (opposite sign to ``cos_i``; 0 under TIR), ``eta_it`` the
+    relative index eta_t/eta_i seen by this direction and ``eta_ti = 1 / eta_it``.
+    """
+    outside = cos_i >= 0
+    eta_it = jnp.where(outside, eta, 1.0 / eta)
+    eta_ti = jnp.where(outside, 1.0 / eta, eta)
+    ci = jnp.abs(cos_i)
+    ct, valid = snell_cos_t(ci, eta_it)
+    # F via s/p reflectances with eta_i = 1, eta_t = eta_it
+    ds = ci + eta_it * ct
+    dp = eta_it * ci + ct
+    ds = jnp.where(ds > 0, ds, 1.0)
+    dp = jnp.where(dp > 0, dp, 1.0)
+    r_s = (ci - eta_it * ct) / ds
+    r_p = (eta_it * ci - ct) / dp
+    F = jnp.where(valid, 0.5 * (r_s * r_s + r_p * r_p), 1.0)
+    cos_t = jnp.where(outside, -ct, ct)
+    cos_t = jnp.where(valid, cos_t, 0.0)
+    return F, cos_t, eta_it, eta_ti
+
+
+def fresnel_dielectric_reflectance(cos_i, eta):
+    """Only the reflectance F of :func:`fresnel_dielectric`."""
+    return fresnel_dielectric(cos_i, eta)[0]
+
+
+def fresnel_conductor(cos_i, eta, k):
+    """Unpolarised reflectance of a conductor with complex relative index eta + i k.
+
+    ``cos_i`` in [0, 1] (values below 0 are treated as grazing). Computed from the complex
+    s/p amplitudes of :func:`fresnel_amplitudes_complex`; with k = 0 and eta > 1 it equals
+    :func:`fresnel_dielectric`. Broadcasts ``eta`` and ``k`` against ``cos_i`` (e.g. a
+    trailing RGB axis).
+    """
+    c = jnp.clip(cos_i, 0.0, 1.0)
+    # Real formulation of |r_s|^2, |r_p|^2 (avoids complex autodiff): with
+    # a^2 + b^2 = sqrt((eta^2 - k^2 - s^2)^2 + 4 eta^2 k^2) and a^2 = (that + eta^2 - k^2 - s^2) / 2
+    c2 = c * c
+    s2 = 1.0 - c2
+    e2, k2 = eta * eta, k * k
+    t0 = e2 - k2 - s2
+    a2pb2 = safe_sqrt(t0 * t0 + 4.0 * e2 * k2)
+    a = safe_sqrt(0.5 * (a2pb2 + t0))
+    t1 = a2pb2 + c2
+    t2 = 2.0 * c * a
+    Rs = (t1 - t2) / jnp.maximum(t1 + t2, 1e-30)
+    t3 = c2 * a2pb2 + s2 * s2
+    t4 = t2 * s2
+    Rp = Rs * (t3 - t4) / jnp.maximum(t3 + t4, 1e-30)
+    return 0.5 * (Rs + Rp)
+
+
+def schlick(cos_i, f0):
+    """Schlick's approximation F0 + (1 - F0)(1 - cos)^5 (Schlick 1994)."""
+    m = jnp.clip(1.0 - cos_i, 0.0, 1.0)
+    m2 = m * m
+    return f0 + (1.0 - f0) * m2 * m2 * m
+
+
+def schlick_f0(eta):
+    """Normal-incidence reflectance ((eta - 1)/(eta + 1))^2 of a dielectric."""
+    return ((eta - 1.0) / (eta + 1.0)) ** 2
+
+
+def critical_angle(eta):
+    """Critical angle (radians) from the dense side, ``eta`` = eta_dense / eta_rare > 1."""
+    return jnp.arcsin(1.0 / eta)
