@@ -7,7 +7,9 @@ declared with :func:`static` and is not a pytree leaf.
 
 Shapes: a field declared ``bands=True`` may carry a trailing bands axis (RGB or
 wavelengths) that broadcasts against the model's output bands; other fields broadcast
-against the direction arrays. Both may have leading axes for spatially varying parameters.
+against the direction arrays. Both may have leading axes for spatially varying parameters. A field may default to
+``None`` (an optional parameter, e.g. the second roughness of an anisotropic model): it is
+then no pytree leaf, is not validated and is not fitted.
 
 Validation (:func:`validate`) runs eagerly at the public boundary of every model: a
 concrete value that is NaN, infinite or out of range raises a ``ValueError`` that names the
@@ -150,7 +152,7 @@ def validate(params, expected_cls: type | None = None) -> None:
         if not isinstance(spec, ParamSpec):
             continue
         v = getattr(params, name)
-        if _is_traced(v):
+        if v is None or _is_traced(v):  # None: an optional field left unset (no pytree leaf)
             continue
         try:
             a = np.asarray(v, dtype=float)
