@@ -95,27 +95,29 @@ def params_class(cls):
     Numeric fields given as python numbers, tuples or numpy arrays are converted to jax
     arrays of the default float dtype; static fields are checked against their choices.
     """
+    user_post_init = cls.__dict__.get("__post_init__")
+
+    # Installed before the dataclass is made, so that the generated __init__ calls it.
+    def __post_init__(self):
+        klass = type(self)
+        for name in klass._data_fields:
+            object.__setattr__(self, name, _to_array(getattr(self, name)))
+        for name in klass._static_fields:
+            spec = klass.__dataclass_fields__[name].metadata[_META_KEY]
+            v = getattr(self, name)
+            if spec.choices is not None and v not in spec.choices:
+                raise ValueError(
+                    f"{klass.__name__}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"
+                )
+        if user_post_init is not None:
+            user_post_init(self)
+
+    cls.__post_init__ = __post_init__
     dc = dataclass(frozen=True)(cls)
     data, meta = [], []
     for f in dataclasses.fields(dc):
         spec = f.metadata.get(_META_KEY)
         (meta if isinstance(spec, StaticSpec) else data).append(f.name)
-    user_post_init = getattr(dc, "__post_init__", None)
-
-    def __post_init__(self):
-        for name in data:
-            object.__setattr__(self, name, _to_array(getattr(self, name)))
-        for name in meta:
-            spec = dc.__dataclass_fields__[name].metadata[_META_KEY]
-            v = getattr(self, name)
-            if spec.choices is not None and v not in spec.choices:
-                raise ValueError(
-                    f"{dc.__name__}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"
-                )
-        if user_post_init is not None:
-            user_post_init(self)
-
-    dc.__post_init__ = __post_init__
     dc._data_fields = tuple(data)
     dc._static_fields = tuple(meta)
     dc.replace = lambda self, **kw: dataclasses.replace(self, **kw)
