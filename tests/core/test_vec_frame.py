@@ -117,3 +117,11 @@ def test_fiber_angles_round_trip():
     t2, p2 = frame.fiber_angles(w)
     np.testing.assert_allclose(t2, th, atol=1e-12)
     np.testing.assert_allclose(p2, ph, atol=1e-12)
+
+
+def test_in_plane_convention_mirror_and_retro():
+    th = jnp.deg2rad(jnp.array([10.0, 45.0, 70.0]))
+    wi, wo = frame.in_plane_directions(th, th)  # theta_o = theta_i: mirror
+    np.testing.assert_allclose(frame.reflect(wi, vec3(0.0, 0.0, 1.0)).to_array(), wo.to_array(), atol=1e-12)
+    wi, wo = frame.in_plane_directions(th, -th)  # theta_o = -theta_i: retro-reflection
+    np.testing.assert_allclose(wi.to_array(), wo.to_array(), atol=1e-12)

@@ -194,3 +194,19 @@ def fiber_direction(theta, phi) -> Vec3:
     """Inverse of :func:`fiber_angles`."""
     ct = jnp.cos(theta)
     return Vec3(jnp.sin(theta), ct * jnp.cos(phi), ct * jnp.sin(phi))
+
+
+# ----------------------------------------------------------------------------------
+# in-plane gonioreflectometer geometry
+
+
+def in_plane_directions(theta_i, theta_o):
+    """Directions of an in-plane measurement with signed outgoing angle (radians).
+
+    wi = (sin theta_i, 0, cos theta_i) and wo = (-sin theta_o, 0, cos theta_o), so that
+    theta_o = theta_i is the mirror direction and theta_o = -theta_i is retro-reflection
+    (the convention of Fig. 4.4, Padrón 2025; spec D12).
+    """
+    wi = Vec3(jnp.sin(theta_i), jnp.zeros_like(jnp.asarray(theta_i, dtype=float)), jnp.cos(theta_i))
+    wo = Vec3(-jnp.sin(theta_o), jnp.zeros_like(jnp.asarray(theta_o, dtype=float)), jnp.cos(theta_o))
+    return wi, wo
