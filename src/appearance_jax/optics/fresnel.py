@@ -108,8 +108,9 @@ def fresnel_dielectric_reflectance(cos_i, eta):
 def fresnel_conductor(cos_i, eta, k):
     """Unpolarised reflectance of a conductor with complex relative index eta + i k.
 
-    ``cos_i`` in [0, 1] (values below 0 are treated as grazing). Computed from the complex
-    s/p amplitudes of :func:`fresnel_amplitudes_complex`; with k = 0 and eta > 1 it equals
+    ``cos_i`` in [0, 1] (values below 0 are treated as grazing). A real closed form of
+    |r_s|^2 and |r_p|^2 (no complex autodiff); it equals the complex-amplitude result of
+    :func:`fresnel_amplitudes_complex` (tested) and, with k = 0 and eta > 1,
     :func:`fresnel_dielectric`. Broadcasts ``eta`` and ``k`` against ``cos_i`` (e.g. a
     trailing RGB axis).
     """
