@@ -72,10 +72,13 @@ def bench_jax(wi_np, wo_np, repeats):
     f_eval = jax.jit(kernel)
     loss = lambda a, wi, wo: jnp.sum(kernel(params.replace(alpha=a), wi, wo))  # noqa: E731
     f_grad = jax.jit(jax.value_and_grad(loss))
+    # forward mode: one scalar parameter -> one JVP pass (what a Jacobian column costs in a fit)
+    f_fwd = jax.jit(lambda a, wi, wo: jax.jvp(lambda a: loss(a, wi, wo), (a,), (jnp.ones_like(a),)))
     a = jnp.float32(ALPHA)
     t_eval = best_time(lambda: f_eval(params, wi, wo).block_until_ready(), repeats)
     t_grad = best_time(lambda: f_grad(a, wi, wo)[1].block_until_ready(), repeats)
-    return t_eval, t_grad, jax.__version__
+    t_fwd = best_time(lambda: f_fwd(a, wi, wo)[1].block_until_ready(), repeats)
+    return t_eval, t_grad, t_fwd, jax.__version__
 
 
 def bench_mitsuba(wi_np, wo_np, repeats):
@@ -132,17 +135,19 @@ def main():
     args = ap.parse_args()
     wi, wo = random_pairs(args.n)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
-    tj_e, tj_g, jv = bench_jax(wi, wo, args.repeats)
+    tj_e, tj_g, tj_f, jv = bench_jax(wi, wo, args.repeats)
     tm_e, tm_g, mv = bench_mitsuba(wi, wo, args.repeats)
-    rows = [("appearance-jax (jax %s)" % jv, tj_e, tj_g), (mv, tm_e, tm_g)]
-    print(f"{'implementation':58s} {'eval [M/s]':>11s} {'eval+grad [M/s]':>16s}")
+    rows = [("appearance-jax, reverse mode (jax %s)" % jv, tj_e, tj_g),
+            ("appearance-jax, forward mode (jvp)", tj_e, tj_f), (mv, tm_e, tm_g)]
+    print(f"{'implementation':64s} {'eval [M/s]':>11s} {'eval+grad [M/s]':>16s}")
     for name, te, tg in rows:
         if te is None:
-            print(f"{name:58s} {'-':>11s} {'-':>16s}")
+            print(f"{name:64s} {'-':>11s} {'-':>16s}")
         else:
-            print(f"{name:58s} {args.n / te / 1e6:11.1f} {args.n / tg / 1e6:16.1f}")
+            print(f"{name:64s} {args.n / te / 1e6:11.1f} {args.n / tg / 1e6:16.1f}")
     if tm_e is not None:
-        print(f"ratio ours/mitsuba: eval {tm_e / tj_e:.2f}, eval+grad {tm_g / tj_g:.2f}")
+        print(f"ratio ours/mitsuba: eval {tm_e / tj_e:.2f}, eval+grad {tm_g / tj_g:.2f} (reverse), "
+              f"{tm_g / tj_f:.2f} (forward)")
 
 
 if __name__ == "__main__":

@@ -90,7 +90,8 @@ def _eval(p: Params, wi: Vec3, wo: Vec3):
     active = (wi.z > 0) & (wo.z > 0)
     h = _half(wi, wo)
     D = md.D(kind, h, ax, ay)
-    G = md.G2(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated")
+    G = md.G2(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated",
+                reflection_only=True)
     den = 4.0 * wi.z * wo.z
     ok = active & (den > 0)
     # safe-where: the masked branch divides by 1, so gradients stay finite at grazing
@@ -124,7 +125,8 @@ def _sample(p: Params, wi: Vec3, u):
     pdf = _pdf_from_half(p, wi, m, ok)
     # weight = f cos_o / pdf = R F G2 / G1(wi), with 1/G1(wi) = mu(wi) / cos_i (no D: exact
     # even where D is huge for small roughness)
-    G = md.G2(kind, wi, wo, m, ax, ay, correlated=p.shadowing == "correlated")
+    G = md.G2(kind, wi, wo, m, ax, ay, correlated=p.shadowing == "correlated",
+                reflection_only=True)
     mu = md.projected_area(kind, wi, ax, ay)
     ok = ok & (pdf > 0)
     w = jnp.where(ok, G * mu / jnp.where(ok, wi.z, 1.0), 0.0)

@@ -107,13 +107,18 @@ def G1(kind: str, w: Vec3, m: Vec3, ax, ay=None):
     return jnp.where(_chi(w, m), _g1_nochi(kind, w, ax, ay), 0.0)
 
 
-def G2(kind: str, wi: Vec3, wo: Vec3, m: Vec3, ax, ay=None, correlated: bool = True):
+def G2(kind: str, wi: Vec3, wo: Vec3, m: Vec3, ax, ay=None, correlated: bool = True,
+       reflection_only: bool = False):
     """Masking-shadowing G2(wi, wo, m): height-correlated (default) or separable.
 
     Reflection (wi.z wo.z > 0) correlated: 1 / (1 + Lambda_i + Lambda_o) (Heitz 2014),
     computed as |zi||zo| / (mu_i |zo| + mu_o |zi| - |zi||zo|) to stay finite at grazing.
     Transmission (wi.z wo.z < 0) correlated: B(1 + Lambda_i, 1 + Lambda_o) (Heitz 2014).
     Separable: G1(wi, m) G1(wo, m).
+
+    ``reflection_only=True`` (static) skips the transmission branch: reflection-only models
+    (conductors, coated diffuse) then pay for no log-Gamma evaluations, which jnp.where
+    would otherwise compute for every sample.
     """
     ay = _ay(ax, ay)
     chi = _chi(wi, m) & _chi(wo, m)
@@ -127,6 +132,8 @@ def G2(kind: str, wi: Vec3, wo: Vec3, m: Vec3, ax, ay=None, correlated: bool = T
     den = mui * zo + muo * zi - zi * zo
     ok = den > 0
     g_refl = jnp.where(ok, zi * zo / jnp.where(ok, den, 1.0), 0.0)
+    if reflection_only:
+        return jnp.where(chi & (wi.z * wo.z > 0), g_refl, 0.0)
     # transmission: Beta function via log-Gamma; Lambda = mu/|z| - 1 (clamped at grazing,
     # where chi = 0 anyway)
     li = jnp.minimum(mui / jnp.maximum(zi, 1.0 / _LAMBDA_MAX) - 1.0, _LAMBDA_MAX)
