@@ -1,0 +1,236 @@
+"""The property harness (appearance_jax.testing) applied to every registered model.
+
+Every model in ``appearance_jax.registry`` must have a parameter grid here (``GRID``: the
+default run, a few cases; ``SLOW_GRID``: a wider sweep, ``-m slow``); the test
+``test_every_registered_model_has_a_grid`` fails otherwise. For each case:
+
+- reciprocity, if the model claims it (``Model.reciprocal``);
+- white furnace: A(wi) <= 1 by importance sampling and quadrature, and A == 1 for the
+  cases marked lossless (Lambert with reflectance 1; phase functions always integrate to
+  1). Single-scattering microfacet models lose energy: only A <= 1 is asserted;
+- sample/eval/pdf consistency, and importance vs uniform sampling;
+- chi-square goodness of fit of the sampler (family-wise significance 1% over the
+  suite's chi-square tests, Sidak);
+- jax.grad vs central finite differences of a fixed linear functional of eval and pdf.
+
+While a model module listed in the registry does not exist yet, its cases are skipped
+and ``test_registry_loads`` fails.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from appearance_jax import registry, testing
+
+
+@dataclass(frozen=True)
+class Case:
+    id: str
+    params: dict  # keyword arguments of model.Params (or {"preset": name})
+    lossless: bool = False
+    opts: dict = field(default_factory=dict)  # per-check overrides: {"furnace": {...}, "chi2": {...}}
+
+
+GRID: dict[str, list[Case]] = {
+    "lambert": [
+        Case("white", dict(reflectance=1.0), lossless=True),
+        Case("rgb", dict(reflectance=(0.2, 0.5, 0.9))),
+    ],
+    "rough_conductor": [
+        Case("ggx_gold", dict(alpha=0.3)),
+        Case("beckmann_aniso_separable", dict(alpha=0.25, alpha_v=0.5, distribution="beckmann",
+                                              shadowing="separable")),
+        Case("ggx_rough_white", dict(alpha=0.9, eta=0.2, k=8.0, specular_reflectance=(1.0, 0.8, 0.5))),
+    ],
+    "rough_dielectric": [
+        Case("ggx_glass", dict(alpha=0.3, eta=1.5)),
+        Case("beckmann_bubble_separable", dict(alpha=0.4, eta=1 / 1.33, distribution="beckmann",
+                                               shadowing="separable")),
+    ],
+    "rough_plastic": [
+        Case("ggx_rgb", dict(alpha=0.3, diffuse_reflectance=(0.2, 0.5, 0.8), eta=1.5)),
+        Case("beckmann_white_nonlinear", dict(alpha=0.4, diffuse_reflectance=1.0, eta=1.33,
+                                              distribution="beckmann", nonlinear=True)),
+    ],
+    "henyey_greenstein": [
+        Case("isotropic", dict(g=0.0), lossless=True),
+        Case("forward", dict(g=0.8), lossless=True),
+        Case("rgb_bands", dict(g=(-0.4, 0.2, 0.6)), lossless=True),
+    ],
+    "hg_mixture": [
+        Case("default", dict(), lossless=True),
+        Case("matte2", dict(preset="matte2"), lossless=True),
+        Case("rgb_bands", dict(w_g=(0.3, 0.6, 0.9), g1=0.7, g2=(-0.6, -0.2, 0.1)), lossless=True),
+    ],
+}
+
+_FINE = {"furnace": dict(n_theta=256, n_phi=512)}  # narrow lobes need a finer quadrature
+# |g| = 0.95: a lobe of width ~(1 - |g|)^2 in cos theta about wi needs many nodes in theta;
+# HG lobes are symmetric about wi (the rule's pole), so few are needed in phi
+_PEAKED = {"furnace": dict(n_theta=512, n_phi=16)}
+
+SLOW_GRID: dict[str, list[Case]] = {
+    "lambert": [Case(f"rho{r}", dict(reflectance=r), lossless=r == 1.0) for r in (0.0, 0.3, 1.0)],
+    "rough_conductor": [
+        Case(f"{d}_{s}_a{a}", dict(alpha=a, distribution=d, shadowing=s), opts=_FINE if a < 0.2 else {})
+        for d in ("ggx", "beckmann") for s in ("correlated", "separable") for a in (0.1, 0.5, 1.5)
+    ] + [Case("ggx_aniso", dict(alpha=0.1, alpha_v=0.6), opts=_FINE)],
+    "rough_dielectric": [
+        Case(f"{d}_{s}_a{a}_eta{e:.3g}", dict(alpha=a, eta=e, distribution=d, shadowing=s),
+             opts=_FINE if a < 0.2 else {})
+        for d in ("ggx", "beckmann") for s in ("correlated", "separable") for a in (0.1, 0.6)
+        for e in (1.5, 1 / 1.5)
+    ] + [Case("ggx_aniso_diamond", dict(alpha=0.2, alpha_v=0.5, eta=2.42))],
+    "rough_plastic": [
+        Case(f"{d}_a{a}_nl{nl}", dict(alpha=a, diffuse_reflectance=(0.1, 0.5, 1.0), distribution=d, nonlinear=nl),
+             opts=_FINE if a < 0.2 else {})
+        for d in ("ggx", "beckmann") for a in (0.1, 0.6) for nl in (False, True)
+    ] + [Case("ggx_mitsuba_tables_separable", dict(alpha=0.3, diffuse_reflectance=1.0, specular_reflectance=0.5,
+                                                   eta=2.5, tables="mitsuba", shadowing="separable"))],
+    "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
+                          for g in (-0.95, -0.5, 0.3, 0.95)],
+    "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]
+    + [Case("opposed", dict(w_g=0.3, g1=0.95, g2=-0.95), lossless=True, opts=_PEAKED)],
+}
+
+
+# ----------------------------------------------------------------------------------
+# loading the registry (robust while model modules are being written)
+
+
+def _load():
+    """Registered models by name, and the registry modules that do not exist yet."""
+    try:
+        return {m.name: m for m in registry.models()}, []
+    except ImportError:
+        pass
+    models, missing = {}, []
+    for mod in registry._MODULES:
+        try:
+            model = importlib.import_module(mod).MODEL
+        except ModuleNotFoundError as e:
+            if e.name != mod:  # a module that exists but imports something missing: a real error
+                raise
+            missing.append(mod)
+            continue
+        models[model.name] = model
+    return models, missing
+
+
+MODELS, MISSING = _load()
+
+
+def _cases(grid):
+    names = sorted(set(grid) | set(MODELS))
+    return [pytest.param(name, case, id=f"{name}-{case.id}") for name in names for case in grid.get(name, [])]
+
+
+CASES = _cases(GRID)
+SLOW_CASES = _cases(SLOW_GRID)
+N_CHI2 = len(CASES)  # Sidak correction over the chi-square tests of the default run
+
+
+def _setup(name, case):
+    if name not in MODELS:
+        pytest.skip(f"model {name!r} is not importable yet (missing: {', '.join(MISSING)})")
+    model = MODELS[name]
+    kw = dict(case.params)
+    if "preset" in kw:
+        return model, model.presets[kw.pop("preset")]
+    return model, model.Params(**kw)
+
+
+def test_registry_loads():
+    assert not MISSING, f"registry modules missing: {MISSING}"
+    assert {m.name for m in registry.models()} == set(MODELS)
+
+
+def test_every_registered_model_has_a_grid():
+    no_grid = sorted(set(MODELS) - set(GRID))
+    no_slow = sorted(set(MODELS) - set(SLOW_GRID))
+    assert not no_grid and not no_slow, f"models without a property-test grid: default {no_grid}, slow {no_slow}"
+    for name in MODELS:
+        assert GRID[name] and SLOW_GRID[name]
+
+
+# ----------------------------------------------------------------------------------
+# the checks
+
+
+def _reciprocity(model, params, case, scale=1):
+    if not model.reciprocal:
+        pytest.skip(f"{model.name} is not reciprocal (Model.reciprocal = False)")
+    testing.assert_reciprocity(model, params, key=1, n=256 * scale)
+
+
+def _furnace(model, params, case, scale=1):
+    kw = dict(key=2, n_wi=4 * scale, n_samples=2**13 * scale, n_theta=96, n_phi=192, lossless=case.lossless)
+    kw.update(case.opts.get("furnace", {}))
+    testing.assert_white_furnace(model, params, **kw)
+
+
+def _sampling(model, params, case, scale=1):
+    if model.sample is None:
+        pytest.skip(f"{model.name} has no sampler")
+    kw = dict(key=3, n_wi=4 * scale, n_samples=2**13 * scale)
+    kw.update(case.opts.get("sampling", {}))
+    testing.assert_sampling(model, params, **kw)
+
+
+def _chi2(model, params, case, scale=1, n_tests=N_CHI2):
+    if model.sample is None or model.pdf is None:
+        pytest.skip(f"{model.name} has no sampler/pdf")
+    kw = dict(key=4, n_wi=2 * scale, n_samples=2**16 * scale, n_tests=n_tests)
+    kw.update(case.opts.get("chi2", {}))
+    testing.assert_chi2(model, params, **kw)
+
+
+def _gradients(model, params, case, scale=1):
+    """d/dparams of a fixed linear functional of eval (and pdf) at 32 pairs, vs FD.
+
+    The pairs mix uniform directions and directions sampled from the model, so the
+    functional sees the lobes. Evaluated under jit (parameters traced, no validation),
+    so the finite differences may step across a closed bound such as reflectance = 1.
+    """
+    wi, wo = testing.reciprocity_pairs(model, params, key=5, n=32 * scale)
+    wi, wo = (w.map(jnp.asarray) for w in (wi, wo))
+    f0 = np.asarray(model.eval(params, wi, wo))
+    c = jax.random.uniform(jax.random.key(6), f0.shape, jnp.float64) / max(float(np.abs(f0).max()), 1e-12)
+    has_pdf = model.pdf is not None
+    if has_pdf:
+        p0 = np.asarray(model.pdf(params, wi, wo))
+        d = jax.random.uniform(jax.random.key(7), p0.shape, jnp.float64) / max(float(np.abs(p0).max()), 1e-12)
+
+    @jax.jit
+    def fn(p):
+        out = jnp.sum(c * model.eval(p, wi, wo))
+        return out + jnp.sum(d * model.pdf(p, wi, wo)) if has_pdf else out
+
+    testing.assert_gradients(fn, params, name=model.name)
+
+
+CHECKS = {"reciprocity": _reciprocity, "furnace": _furnace, "sampling": _sampling, "chi2": _chi2,
+          "gradients": _gradients}
+
+
+@pytest.mark.parametrize("check", list(CHECKS))
+@pytest.mark.parametrize("name,case", CASES)
+def test_property(name, case, check):
+    model, params = _setup(name, case)
+    CHECKS[check](model, params, case)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("check", list(CHECKS))
+@pytest.mark.parametrize("name,case", SLOW_CASES)
+def test_property_wide(name, case, check):
+    model, params = _setup(name, case)
+    kw = dict(n_tests=len(SLOW_CASES)) if check == "chi2" else {}
+    CHECKS[check](model, params, case, scale=2, **kw)
