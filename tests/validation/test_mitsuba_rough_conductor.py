@@ -31,6 +31,7 @@ import jax.numpy as jnp  # noqa: E402
 from appearance_jax.bsdf import rough_conductor as rc  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
+from mitsuba_common import as_vec3, max_rel_error, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1200
 REL_TOL = 1e-4
@@ -66,26 +67,6 @@ def _pairs(rng, n, au, av):
     return wi.astype(np.float32), wo.astype(np.float32)
 
 
-def _walter_g1(w, au, av):
-    """Walter et al. 2007, Eq. 27 (the approximation Mitsuba uses for Beckmann)."""
-    a = np.abs(w[:, 2]) / np.sqrt((au * w[:, 0]) ** 2 + (av * w[:, 1]) ** 2)
-    return np.where(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a))
-
-
-def _vec(a):
-    a = np.asarray(a, dtype=np.float64)
-    return Vec3(jnp.asarray(a[:, 0]), jnp.asarray(a[:, 1]), jnp.asarray(a[:, 2]))
-
-
-def _max_rel(ours, ref):
-    ours, ref = np.asarray(ours, float), np.asarray(ref, float)
-    scale = np.max(np.abs(ref))
-    big = np.abs(ref) > TINY * scale
-    rel = np.max(np.abs(ours[big] - ref[big]) / np.abs(ref[big]))
-    tiny_abs = np.max(np.abs(ours[~big] - ref[~big]), initial=0.0) / scale
-    return rel, tiny_abs, int(big.sum())
-
-
 @pytest.mark.parametrize("cfg", CONFIGS, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CONFIGS])
 def test_eval_and_pdf_match_mitsuba(cfg):
     dist, au, av, (eta, k), spec = cfg
@@ -108,22 +89,22 @@ def test_eval_and_pdf_match_mitsuba(cfg):
 
     p = rc.Params(alpha=au, alpha_v=av, eta=eta, k=k, specular_reflectance=spec, distribution=dist,
                   shadowing="separable")
-    Wi, Wo = _vec(wi), _vec(wo)
+    Wi, Wo = as_vec3(wi), as_vec3(wo)
     f = np.asarray(rc.eval(p, Wi, Wo)) * wo[:, 2:3].astype(np.float64)
     pdf = np.asarray(rc.pdf(p, Wi, Wo))
     if dist == "beckmann":
         n = Vec3(jnp.zeros(N_PAIRS), jnp.zeros(N_PAIRS), jnp.ones(N_PAIRS))
         g1i = np.asarray(md.G1("beckmann", Wi, n, au, av))
         g1o = np.asarray(md.G1("beckmann", Wo, n, au, av))
-        ci = _walter_g1(wi.astype(float), au, av) / g1i
-        co = _walter_g1(wo.astype(float), au, av) / g1o
-        raw_rel, _, _ = _max_rel(f, f_mi)
+        ci = walter_beckmann_g1(wi.astype(float), au, av) / g1i
+        co = walter_beckmann_g1(wo.astype(float), au, av) / g1o
+        raw_rel, _, _ = max_rel_error(f, f_mi, TINY)
         assert raw_rel < 1e-2  # the approximation's own error, < 0.35% per G1 factor
         f = f * (ci * co)[:, None]
         pdf = pdf * ci
 
-    rel_f, tiny_f, nf = _max_rel(f, f_mi)
-    rel_p, tiny_p, npdf = _max_rel(pdf, p_mi)
+    rel_f, tiny_f, nf = max_rel_error(f, f_mi, TINY)
+    rel_p, tiny_p, npdf = max_rel_error(pdf, p_mi, TINY)
     print(f"\n{dist} au={au} av={av}: max rel err f {rel_f:.2e} ({nf} entries), pdf {rel_p:.2e} ({npdf})")
     assert nf > 300 and npdf > 100  # the lobe was actually sampled
     assert rel_f < REL_TOL and rel_p < REL_TOL

@@ -36,6 +36,7 @@ import jax.numpy as jnp  # noqa: E402
 from appearance_jax.bsdf import rough_dielectric as rd  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
+from mitsuba_common import as_vec3, max_rel_error, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1500
 REL_TOL = 1e-4
@@ -82,26 +83,6 @@ def _pairs(rng, n, au, av, eta):
     return wi.astype(np.float32), wo.astype(np.float32)
 
 
-def _walter_g1(w, au, av):
-    """Walter et al. 2007, Eq. 27 (the approximation Mitsuba uses for Beckmann)."""
-    a = np.abs(w[:, 2]) / np.sqrt((au * w[:, 0]) ** 2 + (av * w[:, 1]) ** 2)
-    return np.where(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a))
-
-
-def _vec(a):
-    a = np.asarray(a, dtype=np.float64)
-    return Vec3(jnp.asarray(a[:, 0]), jnp.asarray(a[:, 1]), jnp.asarray(a[:, 2]))
-
-
-def _max_rel(ours, ref):
-    ours, ref = np.asarray(ours, float), np.asarray(ref, float)
-    scale = np.max(np.abs(ref))
-    big = np.abs(ref) > TINY * scale
-    rel = np.max(np.abs(ours[big] - ref[big]) / np.abs(ref[big]))
-    tiny_abs = np.max(np.abs(ours[~big] - ref[~big]), initial=0.0) / scale
-    return rel, tiny_abs, int(big.sum())
-
-
 @pytest.mark.parametrize("cfg", CONFIGS, ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}" for c in CONFIGS])
 def test_eval_and_pdf_match_mitsuba(cfg):
     dist, au, av, eta = cfg
@@ -123,7 +104,7 @@ def test_eval_and_pdf_match_mitsuba(cfg):
         f_rad[j] = bsdf.eval(rad, si, a)[0]
 
     p = rd.Params(alpha=au, alpha_v=av, eta=eta, distribution=dist, shadowing="separable")
-    Wi, Wo = _vec(wi), _vec(wo)
+    Wi, Wo = as_vec3(wi), as_vec3(wo)
     f = np.asarray(rd.eval(p, Wi, Wo))[:, 0]
     pdf = np.asarray(rd.pdf(p, Wi, Wo))
     transmit = wi[:, 2] * wo[:, 2] < 0
@@ -131,9 +112,9 @@ def test_eval_and_pdf_match_mitsuba(cfg):
     if dist == "beckmann":
         n = Vec3(jnp.zeros(N_PAIRS), jnp.zeros(N_PAIRS), jnp.ones(N_PAIRS))
         # G1(w, n) (chi = 1 on both sides) is the Smith factor 1 / (1 + Lambda(w))
-        ci = _walter_g1(wi.astype(float), au, av) / np.asarray(md.G1("beckmann", Wi, n, au, av))
-        co = _walter_g1(wo.astype(float), au, av) / np.asarray(md.G1("beckmann", Wo, n, au, av))
-        assert _max_rel(f * np.abs(wo[:, 2]), f_imp)[0] < 1e-2
+        ci = walter_beckmann_g1(wi.astype(float), au, av) / np.asarray(md.G1("beckmann", Wi, n, au, av))
+        co = walter_beckmann_g1(wo.astype(float), au, av) / np.asarray(md.G1("beckmann", Wo, n, au, av))
+        assert max_rel_error(f * np.abs(wo[:, 2]), f_imp, TINY)[0] < 1e-2
         f = f * ci * co
         pdf = pdf * ci
 
@@ -149,10 +130,10 @@ def test_eval_and_pdf_match_mitsuba(cfg):
 
     f_rad_ours = f * np.abs(w64[:, 2])
     out = {
-        "importance": _max_rel(f * np.abs(v64[:, 2]), f_imp),
-        "radiance": _max_rel(f_rad_ours, f_rad),
-        "radiance_well_conditioned": _max_rel(np.where(well, f_rad_ours, 0.0), np.where(well, f_rad, 0.0)),
-        "pdf": _max_rel(pdf, p_mi),
+        "importance": max_rel_error(f * np.abs(v64[:, 2]), f_imp, TINY),
+        "radiance": max_rel_error(f_rad_ours, f_rad, TINY),
+        "radiance_well_conditioned": max_rel_error(np.where(well, f_rad_ours, 0.0), np.where(well, f_rad, 0.0), TINY),
+        "pdf": max_rel_error(pdf, p_mi, TINY),
     }
     print(f"\n{dist} au={au} av={av} eta={eta}: " +
           ", ".join(f"{k} {v[0]:.2e} ({v[2]})" for k, v in out.items()))

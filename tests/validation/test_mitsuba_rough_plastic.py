@@ -41,6 +41,7 @@ mi = pytest.importorskip("mitsuba")
 from appearance_jax.bsdf import rough_plastic as rp  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
+from mitsuba_common import as_vec3, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1200
 TINY = 1e-5  # Mitsuba's f cos theta_o below this (1/sr) is not compared
@@ -120,7 +121,7 @@ def _pairs(dist, alpha, seed=7):
     st2 = np.sqrt(1 - u[2] ** 2)
     wo = np.stack([st2 * np.cos(2 * np.pi * u[3]), st2 * np.sin(2 * np.pi * u[3]), u[2]], 1)
     h = N_PAIRS // 2
-    m = md.sample_visible(dist, _vec(wi[:h]), alpha, alpha, jnp.asarray(u[4, :h]), jnp.asarray(u[5, :h]))
+    m = md.sample_visible(dist, as_vec3(wi[:h]), alpha, alpha, jnp.asarray(u[4, :h]), jnp.asarray(u[5, :h]))
     m = np.stack([np.asarray(m.x), np.asarray(m.y), np.asarray(m.z)], 1)
     wo[:h] = 2 * np.sum(wi[:h] * m, 1, keepdims=True) * m - wi[:h]
     # mirrored directions below the horizon: replace by their reflection about the plane
@@ -131,20 +132,8 @@ def _pairs(dist, alpha, seed=7):
     return f32(wi), f32(wo)
 
 
-def _vec(a):
-    return Vec3(jnp.asarray(a[:, 0]), jnp.asarray(a[:, 1]), jnp.asarray(a[:, 2]))
-
-
-def _rational_g1(w, alpha):
-    """Walter et al. (2007) Eq. 27: Mitsuba's Beckmann G1 (no microfacet-side check needed
-    here: both directions see the front of h)."""
-    t2 = alpha**2 * (w[:, 0] ** 2 + w[:, 1] ** 2) / w[:, 2] ** 2
-    a = 1.0 / np.sqrt(np.maximum(t2, 1e-300))
-    return np.where(a >= 1.6, 1.0, (3.535 * a + 2.181 * a * a) / (1.0 + 2.276 * a + 2.577 * a * a))
-
-
 def _exact_g1(w, alpha, dist):
-    return w[:, 2] / np.asarray(md.projected_area(dist, _vec(w), alpha))
+    return w[:, 2] / np.asarray(md.projected_area(dist, as_vec3(w), alpha))
 
 
 _eval_with = jax.jit(rp._eval_with)
@@ -155,12 +144,12 @@ _lobe_p = jax.jit(lambda p, tab, mu: rp._lobe_probability(p, rp._transmittance_a
 def _ours(p, tab, wi, wo):
     """Our f cos theta_o and pdf, with Mitsuba's rational Beckmann G1 put into the
     specular lobe (so that the comparison tests everything else at 1e-4)."""
-    Wi, Wo = _vec(wi), _vec(wo)
+    Wi, Wo = as_vec3(wi), as_vec3(wo)
     f = np.asarray(_eval_with(p, tab, Wi, Wo))
     pdf = np.asarray(_pdf_with(p, tab, Wi, Wo))
     if p.distribution == "beckmann":
         a = float(p.alpha)
-        gi_r, go_r = _rational_g1(wi, a), _rational_g1(wo, a)
+        gi_r, go_r = walter_beckmann_g1(wi, a), walter_beckmann_g1(wo, a)
         gi, go = _exact_g1(wi, a, "beckmann"), _exact_g1(wo, a, "beckmann")
         p_spec = p.replace(diffuse_reflectance=(0.0,) * 3)
         f_spec = np.asarray(_eval_with(p_spec, tab, Wi, Wo))
@@ -250,7 +239,7 @@ def test_public_model_vs_mitsuba(dist):
             err = _max_rel(f, f_mi, f_mi > TINY)
             # and the public entry point agrees with the kernel used above
             if dist == "ggx":
-                f_pub = np.asarray(rp.eval(p, _vec(wi), _vec(wo))) * wo[:, 2:3]
+                f_pub = np.asarray(rp.eval(p, as_vec3(wi), as_vec3(wo))) * wo[:, 2:3]
                 np.testing.assert_allclose(f_pub, f, rtol=1e-12, atol=0)
             worst = max(worst, err)
     print(f"public model ({dist}, own tables) vs Mitsuba: max rel err {worst:.1e}")
