@@ -150,6 +150,8 @@ def validate(params, expected_cls: type | None = None) -> None:
             f"expected parameters of type {expected_cls.__qualname__}, got {type(params).__qualname__}"
         )
     cls = type(params)
+    # "rough_conductor.Params": every model's class is called Params, so name its module too
+    label = f"{cls.__module__.rsplit('.', 1)[-1]}.{cls.__name__}"
     for name, spec in param_specs(cls).items():
         if not isinstance(spec, ParamSpec):
             continue
@@ -159,13 +161,13 @@ def validate(params, expected_cls: type | None = None) -> None:
         try:
             a = np.asarray(v, dtype=float)
         except (TypeError, ValueError) as e:
-            raise ValueError(f"{cls.__name__}.{name} = {v!r} is not numeric") from e
+            raise ValueError(f"{label}.{name} = {v!r} is not numeric") from e
         bad = ~np.isfinite(a) | ~spec.contains(a)
         if np.any(bad):
             first = a[bad].flat[0] if a.ndim else a
             what = "is not finite; valid range" if not np.isfinite(first) else "is outside the valid range"
             raise ValueError(
-                f"{cls.__name__}.{name} = {float(first):g} {what} {spec.range_str()}"
+                f"{label}.{name} = {float(first):g} {what} {spec.range_str()}"
                 + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
                 + (f" ({spec.doc})" if spec.doc else "")
             )
