@@ -125,3 +125,17 @@ def test_in_plane_convention_mirror_and_retro():
     np.testing.assert_allclose(frame.reflect(wi, vec3(0.0, 0.0, 1.0)).to_array(), wo.to_array(), atol=1e-12)
     wi, wo = frame.in_plane_directions(th, -th)  # theta_o = -theta_i: retro-reflection
     np.testing.assert_allclose(wi.to_array(), wo.to_array(), atol=1e-12)
+
+
+def test_polar_and_azimuth_helpers():
+    th, ph = jnp.array([0.3, 1.2, 0.0]), jnp.array([0.7, -2.0, 1.0])
+    w = frame.spherical_direction(th, ph)
+    np.testing.assert_allclose(frame.tan2_theta(w), jnp.tan(th) ** 2, rtol=1e-12)
+    c, s = frame.cos_sin_phi(w)
+    np.testing.assert_allclose(c[:2], jnp.cos(ph[:2]), atol=1e-12)
+    np.testing.assert_allclose(s[:2], jnp.sin(ph[:2]), atol=1e-12)
+    assert float(c[2]) == 1.0 and float(s[2]) == 0.0  # the pole: azimuth defined as 0
+    assert float(frame.tan2_theta(vec3(1.0, 0.0, 0.0))) >= 1e30  # grazing: large, finite
+    down = vec3(0.0, 0.0, -1.0)
+    assert list(np.asarray(frame.same_hemisphere(w, down))) == [False, False, False]
+    assert list(np.asarray(frame.same_hemisphere(w, w))) == [True, True, True]

@@ -19,7 +19,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from .special import safe_acos, safe_atan2, safe_sqrt
-from .vec import Vec3, cross, dot, normalize
+from .vec import Vec3, cross, dot, normalize, where
 
 # ----------------------------------------------------------------------------------
 # surface frame: z is the normal
@@ -132,8 +132,7 @@ def refract(w: Vec3, n: Vec3, eta):
     inv_eta = 1.0 / eta
     wt = (-w) * inv_eta + n * (cos_i * inv_eta - cos_t)
     zero = jnp.zeros_like(cos_t)
-    wt = Vec3(jnp.where(valid, wt.x, zero), jnp.where(valid, wt.y, zero), jnp.where(valid, wt.z, zero))
-    return wt, valid
+    return where(valid, wt, Vec3(zero, zero, zero)), valid
 
 
 # ----------------------------------------------------------------------------------

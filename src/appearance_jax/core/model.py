@@ -44,13 +44,6 @@ def boundary(kernel: Callable, params_cls: type, static_argnames: tuple[str, ...
     return public
 
 
-def band_axis(*values) -> jax.Array:
-    """Broadcast band-valued parameters to a common trailing axis (at least length 1)."""
-    shapes = [jnp.shape(v) for v in values]
-    shape = jnp.broadcast_shapes(*shapes) if shapes else ()
-    return shape if len(shape) else (1,)
-
-
 def with_bands(x) -> jax.Array:
     """Give a per-direction array a trailing singleton bands axis to broadcast against bands."""
     return jnp.asarray(x)[..., None]

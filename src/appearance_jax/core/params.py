@@ -131,10 +131,6 @@ def param_specs(params_or_cls) -> dict[str, ParamSpec | StaticSpec]:
     return {f.name: f.metadata[_META_KEY] for f in dataclasses.fields(cls) if _META_KEY in f.metadata}
 
 
-def is_params(obj) -> bool:
-    return dataclasses.is_dataclass(obj) and hasattr(type(obj), "_data_fields")
-
-
 def _is_traced(v) -> bool:
     return isinstance(v, jax.core.Tracer)
 

@@ -99,10 +99,6 @@ def cross(a: Vec3, b: Vec3) -> Vec3:
     return Vec3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x)
 
 
-def squared_norm(a: Vec3) -> jax.Array:
-    return dot(a, a)
-
-
 def norm(a: Vec3) -> jax.Array:
     from .special import safe_sqrt  # local import: special has no dependency on vec
 

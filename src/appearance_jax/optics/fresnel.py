@@ -100,11 +100,6 @@ def fresnel_dielectric(cos_i, eta):
     return F, cos_t, eta_it, eta_ti
 
 
-def fresnel_dielectric_reflectance(cos_i, eta):
-    """Only the reflectance F of :func:`fresnel_dielectric`."""
-    return fresnel_dielectric(cos_i, eta)[0]
-
-
 def fresnel_conductor(cos_i, eta, k):
     """Unpolarised reflectance of a conductor with complex relative index eta + i k.
 
