@@ -59,6 +59,15 @@ GRID: dict[str, list[Case]] = {
         Case("beckmann_white_nonlinear", dict(alpha=0.4, diffuse_reflectance=1.0, eta=1.33,
                                               distribution="beckmann", nonlinear=True)),
     ],
+    # sums of lobes (appearance_jax.bsdf.sum): reflectances kept small enough that A <= 1
+    "rough_conductor+lambert": [
+        Case("ggx_gold_half_rgb_diffuse", dict(alpha=0.3, specular_reflectance=0.5, reflectance=(0.4, 0.2, 0.1))),
+        Case("white_diffuse_zero_spec", dict(alpha=0.2, specular_reflectance=0.0, reflectance=1.0), lossless=True),
+    ],
+    "rough_plastic+lambert": [
+        Case("ggx_rgb", dict(alpha=0.3, diffuse_reflectance=(0.2, 0.5, 0.8), specular_reflectance=0.5,
+                             reflectance=0.1)),
+    ],
     "henyey_greenstein": [
         Case("isotropic", dict(g=0.0), lossless=True),
         Case("forward", dict(g=0.8), lossless=True),
@@ -94,6 +103,17 @@ SLOW_GRID: dict[str, list[Case]] = {
         for d in ("ggx", "beckmann") for a in (0.1, 0.6) for nl in (False, True)
     ] + [Case("ggx_mitsuba_tables_separable", dict(alpha=0.3, diffuse_reflectance=1.0, specular_reflectance=0.5,
                                                    eta=2.5, tables="mitsuba", shadowing="separable"))],
+    "rough_conductor+lambert": [
+        Case(f"{d}_a{a}_ks{ks}", dict(alpha=a, distribution=d, specular_reflectance=ks, reflectance=(0.5, 0.3, 0.1)),
+             opts=_FINE if a < 0.2 else {})
+        for d in ("ggx", "beckmann") for a in (0.1, 0.6) for ks in (0.2, 0.5)
+    ] + [Case("beckmann_aniso_separable", dict(alpha=0.15, alpha_v=0.5, distribution="beckmann", shadowing="separable",
+                                               eta=0.2, k=8.0, specular_reflectance=0.4, reflectance=0.3), opts=_FINE)],
+    "rough_plastic+lambert": [
+        Case(f"{d}_a{a}", dict(alpha=a, diffuse_reflectance=0.5, reflectance=(0.3, 0.1, 0.2), distribution=d),
+             opts=_FINE if a < 0.2 else {})
+        for d in ("ggx", "beckmann") for a in (0.08, 0.5)
+    ],
     "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]

@@ -1,0 +1,1 @@
+"""Fitting: measurement tables in, parameters with uncertainties and plots out (DESIGN.md, Fitting)."""

@@ -1,0 +1,140 @@
+"""Fit many tables (or texels) that share their angles, in one batched XLA program.
+
+    result = fit_batch("lambert", table, values)      # values: (K, N, B), K tables on table's angles
+    result.x, result.sigma                             # (K, p)
+
+The single-table solve of :mod:`~appearance_jax.fit.solve` is ``vmap``-ed over the batch
+axis (data, masks, sigma, start values); the directions are shared. With more than one
+device the batch axis is **sharded** with ``jax.sharding`` (a 1-D ``Mesh`` named
+``"batch"``; shared arrays replicated), so the same code runs on one CPU, several
+accelerators, or — after ``jax.distributed.initialize()`` — several hosts: XLA partitions
+the program, there is no home-made scheduler. K is padded to a multiple of the device count
+by repeating the last item; the padding is dropped from the result.
+
+A batched while-loop runs until every item has converged, so ``iterations`` is per item
+but the wall time is that of the slowest.
+
+Test on CPU with ``XLA_FLAGS=--xla_force_host_platform_device_count=2``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .solve import FitResult, build_problem, covariance, finish, flags, solve_z, SOLVERS
+from .table import Table
+
+
+@dataclass
+class BatchFitResult:
+    """Results of :func:`fit_batch`; arrays have a leading batch axis K."""
+
+    model: str
+    labels: tuple
+    units: tuple
+    x: np.ndarray  # (K, p)
+    sigma: np.ndarray  # (K, p)
+    loss: np.ndarray  # (K,) mean squared residual in the fit metric
+    iterations: np.ndarray  # (K,)
+    converged: np.ndarray  # (K,)
+    at_bound: np.ndarray  # (K, p) bool
+    poorly_determined: np.ndarray  # (K, p) bool
+    wall_time: float
+    compile_time: float
+    n_devices: int
+    solver: str
+    metric: str
+    _problem: object = None
+    _z: np.ndarray | None = None
+    _data: dict | None = None
+
+    def __len__(self) -> int:
+        return self.x.shape[0]
+
+    def item(self, k: int) -> FitResult:
+        """The full :class:`FitResult` of item k (recomputes its covariance and error metrics)."""
+        data = {n: (v if n in ("wi", "wo", "cos_i") else v[k]) for n, v in self._data.items()}
+        r = finish(self._problem, None, self._z[k], 0.5 * self.loss[k] * max(int((np.asarray(data["weight"]) > 0).sum()), 1),
+                   self.iterations[k], self.converged[k], self.wall_time, self.solver, data=data)
+        return r
+
+
+def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, fix=None, metric: str = "l2",
+              weights=None, max_theta_deg: float | None = 85.0, solver: str = "lm", rtol: float = 1e-8,
+              atol: float = 1e-10, max_steps: int = 400, devices=None, key=None, model_kwargs=None) -> BatchFitResult:
+    """Fit ``model`` to K tables on the angles of ``table``.
+
+    Args:
+        table: gives the directions, quantity, bands and the base mask (its values are ignored).
+        values: (K, N, B) in ``table.quantity`` (NaN = missing).
+        sigma, mask: optional (K, N, B) uncertainties and extra masks.
+        devices: devices to shard the batch over (default: all of ``jax.devices()``).
+        Other arguments as :func:`~appearance_jax.fit.solve.fit`.
+    """
+    if solver not in SOLVERS:
+        raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
+    values = np.asarray(values, np.float64)
+    if values.ndim != 3 or values.shape[1:] != table.values.shape:
+        raise ValueError(f"fit_batch: values must have shape (K, {table.n_samples}, {table.n_bands}), got {values.shape}")
+    K = values.shape[0]
+    base = np.broadcast_to(table.mask, values.shape) & np.isfinite(values)
+    if mask is not None:
+        base = base & np.broadcast_to(np.asarray(mask, bool), values.shape)
+    if sigma is not None:
+        sigma = np.broadcast_to(np.asarray(sigma, np.float64), values.shape)
+
+    # One problem per item only to reuse the single-table checks and scaling; cheap (numpy).
+    items = []
+    for k in range(K):
+        tk = table.replace(values=values[k], mask=base[k], sigma=None if sigma is None else sigma[k],
+                           source=f"{table.source}[{k}]")
+        items.append(build_problem(model, tk, init=init, fix=fix, metric=metric, weights=weights,
+                                   max_theta_deg=max_theta_deg, key=key, model_kwargs=model_kwargs))
+    problem = items[0]
+    sp = problem.space
+    devs = list(devices) if devices is not None else jax.devices()
+    n_dev = len(devs)
+    pad = (-K) % n_dev
+    idx = list(range(K)) + [K - 1] * pad
+    per_item = ("f", "inv_scale", "weight")
+    data = {n: (problem.data[n] if n not in per_item else jnp.stack([items[i].data[n] for i in idx]))
+            for n in problem.data}
+    z0 = jnp.asarray(sp.z_from_x(sp.x_start()), jnp.result_type(float))
+    z0 = jnp.broadcast_to(z0, (len(idx), z0.shape[0]))
+
+    in_axes = ({n: (0 if n in per_item else None) for n in data},)
+
+    def run(z0s, data):
+        def one(z, d):
+            z, loss, steps, ok = solve_z(problem, z, d, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps)
+            x = sp.x_from_z(z)
+            cov, lam, vec = covariance(problem, x, d)
+            return z, x, jnp.sqrt(jnp.abs(jnp.diag(cov))), lam, vec, loss, steps, ok
+
+        return jax.vmap(one, in_axes=(0,) + in_axes)(z0s, data)
+
+    if n_dev > 1:
+        from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+        mesh = Mesh(np.array(devs), ("batch",))
+        batched, shared = NamedSharding(mesh, P("batch")), NamedSharding(mesh, P())
+        z0 = jax.device_put(z0, batched)
+        data = {n: jax.device_put(v, batched if n in per_item else shared) for n, v in data.items()}
+    t0 = time.perf_counter()
+    compiled = jax.jit(run).lower(z0, data).compile()
+    t1 = time.perf_counter()
+    z, x, sig, lam, vec, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
+    wall = time.perf_counter() - t1
+    z, x, sig, lam, vec, loss, steps, ok = (np.asarray(a)[:K] for a in (z, x, sig, lam, vec, loss, steps, ok))
+    n_valid = np.array([max(int((np.asarray(it.data["weight"]) > 0).sum()), 1) for it in items])
+    bound, flat = flags(sp, x, sig, lam, vec)
+    data_k = {n: (v if n not in per_item else np.asarray(v)[:K]) for n, v in data.items()}
+    return BatchFitResult(model=problem.model.name, labels=sp.labels, units=sp.units(), x=x, sigma=sig,
+                          loss=2.0 * loss / n_valid, iterations=steps, converged=ok, at_bound=bound,
+                          poorly_determined=flat, wall_time=wall, compile_time=t1 - t0, n_devices=n_dev,
+                          solver=solver, metric=metric, _problem=problem, _z=z, _data=data_k)
