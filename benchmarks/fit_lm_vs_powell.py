@@ -5,8 +5,9 @@ script fits the same problem both ways and prints iterations, model evaluations,
 and final loss:
 
 - problem: a noisy synthetic in-plane table (6 x 35 directions, RGB, 2 % noise) of a known
-  ``rough_plastic`` (alpha, 3 diffuse albedos; eta and k_s fixed) and of a
-  ``rough_conductor`` (alpha, 3 specular scales; eta, k fixed);
+  ``rough_plastic`` (alpha, 3 diffuse albedos; eta and k_s fixed: 4 free), a
+  ``rough_conductor`` (alpha, 3 specular scales; eta, k fixed: 4 free) and a
+  ``rough_conductor+lambert`` (alpha, 3 specular scales, 3 albedos: 7 free);
 - loss: the same sum of squared L2 residuals, the same start, the same float64 kernels;
 - LM: ``appearance_jax.fit.fit`` (whole solve jitted; compile time reported apart);
 - Powell: ``scipy.optimize.minimize(method="Powell")`` on the physical parameters with the
@@ -40,6 +41,9 @@ CASES = {
                       dict(alpha=0.3, diffuse_reflectance=(0.3, 0.3, 0.3)), ["eta", "specular_reflectance"]),
     "rough_conductor": (dict(alpha=0.12, specular_reflectance=(0.9, 0.8, 0.7)),
                         dict(alpha=0.3, specular_reflectance=(0.6, 0.6, 0.6)), ["eta", "k"]),
+    "rough_conductor+lambert": (dict(alpha=0.2, specular_reflectance=(0.5, 0.4, 0.3), reflectance=(0.3, 0.2, 0.6)),
+                                dict(alpha=0.35, specular_reflectance=(0.3, 0.3, 0.3), reflectance=(0.4, 0.4, 0.4)),
+                                ["eta", "k"]),
 }
 
 

@@ -3,7 +3,20 @@
     appearance-jax models [NAME]        list the models with their parameter tables
     appearance-jax eval --model NAME [--param name=value ...] --theta-i DEG [...] --out DIR
                                         evaluate a BSDF on an in-plane grid; write CSV + PNG
+    appearance-jax eval --model NAME [--param ...] --table TABLE --out DIR
+                                        evaluate a BSDF at a table's directions; write a CSV
+                                        in the table's quantity, print the error against it
+    appearance-jax fit TABLE --model NAME [--preset P] [--fix NAME[=VALUE] ...]
+                       [--param NAME=VALUE ...] [--loss l2|cos_log|relative] [--solver S]
+                       [--starts N] [--max-theta DEG] [--stride S] [--max-steps N]
+                       [--float32] [--out DIR] [--quiet]
+                                        fit a BSDF to a table; write params.json,
+                                        residuals.csv and figures (fit.report)
     appearance-jax demo --out DIR       the evaluation demo of the README
+
+TABLE is a ``.csv`` file (appearance-jax table v1), a MERL ``.binary`` file (every
+``--stride``-th bin, default 3) or ``proxy:NAME[:GRID]`` (a Neural-BRDF proxy of a MERL
+material, GRID gonio|in_plane|merl); see :func:`appearance_jax.fit.io.read_table`.
 
 Angles are in degrees at this boundary (radians inside the library). In-plane tables use a
 signed theta_o: theta_o = theta_i is the mirror direction, theta_o = -theta_i retro-reflection
@@ -66,21 +79,74 @@ def _parse_value(text: str):
         return text
 
 
-def _parse_params(model, assignments: list[str]):
+def _assignments(option: str, items) -> dict:
     kw = {}
-    for a in assignments or []:
-        if "=" not in a:
-            raise SystemExit(f"--param {a!r}: expected name=value (e.g. alpha=0.2 or reflectance=0.8,0.5,0.2)")
+    for a in items or []:
+        if "=" not in a or not a.split("=", 1)[0].strip():
+            raise ValueError(f"{option} {a!r}: expected name=value (e.g. alpha=0.2 or reflectance=0.8,0.5,0.2)")
         k, v = a.split("=", 1)
         kw[k.strip()] = _parse_value(v)
-    if model.presets and "preset" in kw:
-        base = model.presets[kw.pop("preset")]
-        return base.replace(**kw)
-    try:
-        return model.Params(**kw)
-    except TypeError as e:
-        names = [r for r in model.Params.__dataclass_fields__]
-        raise SystemExit(f"{model.name}: {e}; parameters are {', '.join(names)}") from e
+    return kw
+
+
+def _parse_params(model, assignments: list[str], preset: str | None = None):
+    """Params from ``--param name=value`` (``preset=P`` among them, or ``preset``, picks the base)."""
+    kw = _assignments("--param", assignments)
+    preset = kw.pop("preset", preset)
+    names = list(model.Params.__dataclass_fields__)
+    if preset is not None:
+        if preset not in model.presets:
+            raise ValueError(f"{model.name}: no preset {preset!r}; presets: {', '.join(model.presets) or 'none'}")
+        base = model.presets[preset]
+    else:
+        base = model.Params()
+    unknown = [k for k in kw if k not in names]
+    if unknown:
+        raise ValueError(f"{model.name}: unknown parameter(s) {', '.join(unknown)}; parameters are {', '.join(names)}")
+    from .core.params import validate
+
+    params = base.replace(**kw) if kw else base
+    validate(params)
+    return params
+
+
+def _parse_fix(items) -> dict:
+    """``--fix name=value`` (fix at value) and ``--fix name`` (fix at the start value) -> {name: value|None}."""
+    fix = {}
+    for a in items or []:
+        if "=" in a:
+            k, v = a.split("=", 1)
+            if not k.strip():
+                raise ValueError(f"--fix {a!r}: expected name or name=value")
+            fix[k.strip()] = _parse_value(v)
+        elif a.strip():
+            fix[a.strip()] = None
+        else:
+            raise ValueError("--fix: empty parameter name")
+    return fix
+
+
+def _check_fix(model, fix: dict) -> None:
+    """Fail early (before reading a table and compiling) on a --fix name the model does not have."""
+    from .core.params import StaticSpec, param_specs
+
+    specs = param_specs(model.Params)
+    for name in fix:
+        if name not in specs:
+            raise ValueError(f"--fix {name}: {model.name} has no parameter {name!r}; "
+                             f"parameters are {', '.join(specs)}")
+        if isinstance(specs[name], StaticSpec):
+            raise ValueError(f"--fix {name}: a static (configuration) field is not fitted; "
+                             f"set it with --param {name}=VALUE instead")
+
+
+def _max_theta(text: str):
+    if text.strip().lower() in ("none", "off", "no"):
+        return None
+    v = float(text)
+    if not 0 < v <= 90:
+        raise argparse.ArgumentTypeError(f"{text}: must lie in (0, 90] degrees, or 'none'")
+    return v
 
 
 def _parse_range(text: str) -> np.ndarray:
@@ -152,13 +218,19 @@ def cmd_eval(args) -> int:
 
     model = registry.get(args.model)
     if model.kind != "bsdf":
-        raise SystemExit(f"eval: {model.name} is a {model.kind}; in-plane evaluation is for BSDFs")
+        raise ValueError(f"{model.name} is a {model.kind}; evaluation on angles is for BSDFs")
     params = _parse_params(model, args.param)
-    th_i = _parse_range(args.theta_i)
-    th_o = _parse_range(args.theta_o)
+    if args.table is not None:
+        if args.theta_i is not None or args.theta_o is not None:
+            raise ValueError("--theta-i/--theta-o select the in-plane grid; with --table the table's angles are used")
+        return _eval_on_table(model, params, args)
+    if args.stride is not None:
+        raise ValueError("--stride applies to --table (MERL .binary files, proxy:NAME:merl)")
+    th_i = _parse_range(args.theta_i if args.theta_i is not None else "0,30,60")
+    th_o = _parse_range(args.theta_o if args.theta_o is not None else "-89:89:1")
     for name, arr in (("theta-i", th_i), ("theta-o", th_o)):
         if np.any(np.abs(arr) > 90):
-            raise SystemExit(f"--{name}: angles must lie in [-90, 90] degrees, got {arr.min():g}..{arr.max():g}")
+            raise ValueError(f"--{name}: angles must lie in [-90, 90] degrees, got {arr.min():g}..{arr.max():g}")
     os.makedirs(args.out, exist_ok=True)
     ti, to, f = evaluate_in_plane(model, params, th_i, th_o)
     write_table(os.path.join(args.out, f"{model.name}.csv"), ti, to, f)
@@ -166,6 +238,93 @@ def cmd_eval(args) -> int:
     curves = [(f"theta_i = {a:g}", to[ti == a], _luminance(f[ti == a]) * cos_o[ti == a]) for a in th_i]
     plot_in_plane(os.path.join(args.out, f"{model.name}.png"), curves, f"{model.name} (in-plane)")
     print(f"wrote {args.out}/{model.name}.csv ({len(ti)} rows) and {model.name}.png")
+    return 0
+
+
+def _eval_on_table(model, params, args) -> int:
+    """eval --table: the model at the table's directions, written in the table's quantity."""
+    from .fit.csv_table import write_csv
+    from .fit.io import read_table
+    from .fit.residuals import error_metrics
+
+    table = read_table(args.table, stride=args.stride)
+    wi, wo = table.directions()
+    f = model.eval(params, wi, wo)
+    if isinstance(f, tuple):  # stochastic evaluators: (estimate, standard error)
+        f = f[0]
+    f = np.asarray(f, np.float64)
+    if f.ndim == 1:
+        f = f[:, None]
+    if f.shape[1] not in (1, table.n_bands):
+        raise ValueError(f"{model.name} gives {f.shape[1]} bands, the table has {table.n_bands} "
+                         f"({', '.join(table.bands[:5])}{', ...' if table.n_bands > 5 else ''}); "
+                         "give band parameters with one value per table band")
+    f = np.broadcast_to(f, table.values.shape)
+    # rows at or below the horizon (kept, masked, in MERL-grid tables) have no place in a table file
+    above = (np.cos(table.theta_i) > 1e-12) & (np.cos(table.theta_o) > 1e-12)
+    sub = table.select(above)
+    out = sub.with_values(sub.from_brdf(f[above])).replace(source=f"{model.name} at the directions of {table.source}")
+    os.makedirs(args.out, exist_ok=True)
+    path = os.path.join(args.out, f"{model.name}.csv")
+    write_csv(out, path)
+    data, _ = table.brdf()
+    e = error_metrics(f, data, table.mask, np.cos(table.theta_i)[:, None])
+    dropped = f", {int((~above).sum())} below-horizon directions left out" if (~above).any() else ""
+    print(f"wrote {path} ({out.n_samples} directions, quantity {table.quantity}{dropped})")
+    if e["n"]:
+        print(f"{model.name} vs {table.source}: rmse {e['rmse']:.4g} 1/sr, cos_log_rmse {e['cos_log_rmse']:.4g}, "
+              f"log_rmse {e['log_rmse']:.4g}, rel_rmse {e['rel_rmse']:.4g} over {e['n']} values")
+    else:
+        print(f"{model.name} vs {table.source}: no valid values to compare")
+    return 0
+
+
+def cmd_fit(args) -> int:
+    """Fit a BSDF to a table and write the report (float64 unless --float32)."""
+    import jax
+
+    previous = bool(jax.config.jax_enable_x64)
+    jax.config.update("jax_enable_x64", not args.float32)
+    try:
+        return _fit(args)
+    finally:  # main() may run inside a larger program (tests, notebooks): leave its setting alone
+        jax.config.update("jax_enable_x64", previous)
+
+
+def _fit(args) -> int:
+    import shlex
+
+    from . import registry
+    from .fit.io import read_table
+    from .fit.report import write_report
+    from .fit.solve import fit
+
+    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))  # noqa: E731
+    model = registry.get(args.model)
+    if model.kind != "bsdf":
+        raise ValueError(f"{model.name} is a {model.kind}; tables are fitted with BSDFs")
+    if args.starts < 1 or args.max_steps < 1:
+        raise ValueError("--starts and --max-steps must be >= 1")
+    init = _parse_params(model, args.param, args.preset)
+    fix = _parse_fix(args.fix)
+    _check_fix(model, fix)
+    table = read_table(args.table, stride=args.stride)
+    say(f"table: {table.summary()}")
+    say(f"fitting {model.name} ({args.loss} metric, solver {args.solver}, {args.starts} start(s), "
+        f"{'float32' if args.float32 else 'float64'}"
+        + (f", fixed: {', '.join(fix)}" if fix else "") + ")")
+    say("compiling the solve with XLA (one-off, can take tens of seconds) ...")
+    result = fit(model, table, init=init, fix=fix, metric=args.loss, max_theta_deg=args.max_theta,
+                 use_sigma=not args.ignore_sigma, solver=args.solver, max_steps=args.max_steps,
+                 n_starts=args.starts, seed=args.seed, verbose=0 if args.quiet else args.progress_every)
+    print(result.summary(), flush=True)
+    argv = list(args._argv)
+    options = {k: v for k, v in vars(args).items() if k not in ("fn", "_argv")}
+    extra = dict(command="appearance-jax " + shlex.join(argv), argv=argv, options=options)
+    say(f"writing the report to {args.out}:")
+    paths = write_report(result, args.out, model=model, progress=say, extra=extra, plots=not args.no_plots)
+    if args.quiet:
+        print(f"wrote {', '.join(paths.values())}")
     return 0
 
 
@@ -209,21 +368,59 @@ def main(argv: list[str] | None = None) -> int:
     pm = sub.add_parser("models", help="list models and their parameters")
     pm.add_argument("name", nargs="?", help="one model name")
     pm.set_defaults(fn=cmd_models)
-    pe = sub.add_parser("eval", help="evaluate a BSDF on an in-plane grid")
+    pe = sub.add_parser("eval", help="evaluate a BSDF on an in-plane grid or at a table's directions")
     pe.add_argument("--model", required=True)
-    pe.add_argument("--param", action="append", metavar="NAME=VALUE", help="repeatable; bands as a,b,c")
-    pe.add_argument("--theta-i", default="0,30,60", help="degrees: list a,b,c or range a:b:step")
-    pe.add_argument("--theta-o", default="-89:89:1", help="signed degrees (negative = retro side)")
+    pe.add_argument("--param", action="append", metavar="NAME=VALUE",
+                    help="repeatable; bands as a,b,c; preset=P starts from a preset")
+    pe.add_argument("--theta-i", default=None, help="degrees: list a,b,c or range a:b:step (default 0,30,60)")
+    pe.add_argument("--theta-o", default=None,
+                    help="signed degrees, negative = retro side (default -89:89:1)")
+    pe.add_argument("--table", default=None, metavar="TABLE",
+                    help="evaluate at this table's directions instead (.csv, .binary, proxy:NAME[:GRID]); "
+                         "writes a CSV in the table's quantity and prints the error against it")
+    pe.add_argument("--stride", type=int, default=None, help="MERL bin stride for --table (default 3)")
     pe.add_argument("--out", default="out")
     pe.set_defaults(fn=cmd_eval)
+    from .fit.residuals import METRICS
+    from .fit.solve import SOLVERS
+
+    pf = sub.add_parser("fit", help="fit a BSDF to a measured (or proxy) table; write parameters, residuals, figures",
+                        description="Fit a BSDF to a table and write params.json, residuals.csv, maps.png, "
+                                    "slices.png and scatter.png (appearance_jax.fit.report).")
+    pf.add_argument("table", metavar="TABLE", help="PATH.csv | PATH.binary | proxy:NAME[:gonio|in_plane|merl]")
+    pf.add_argument("--model", required=True, help="a BSDF (appearance-jax models lists them)")
+    pf.add_argument("--preset", default=None, help="start from this preset of the model")
+    pf.add_argument("--param", action="append", metavar="NAME=VALUE",
+                    help="start value (repeatable; bands as a,b,c; static fields such as distribution=beckmann)")
+    pf.add_argument("--fix", action="append", metavar="NAME[=VALUE]",
+                    help="hold a parameter fixed, at VALUE or at its start value (repeatable)")
+    pf.add_argument("--loss", choices=METRICS, default="l2", help="fit metric (default l2)")
+    pf.add_argument("--solver", choices=SOLVERS, default="lm", help="default lm (Levenberg-Marquardt)")
+    pf.add_argument("--starts", type=int, default=1, help="number of starts (> 1 adds random starts; default 1)")
+    pf.add_argument("--seed", type=int, default=0, help="seed of the random starts")
+    pf.add_argument("--max-theta", type=_max_theta, default=85.0, metavar="DEG",
+                    help="mask samples with theta_i or theta_o above DEG (default 85; 'none' keeps all)")
+    pf.add_argument("--stride", type=int, default=None,
+                    help="MERL bin stride for .binary (default 3) and proxy:NAME:merl (default 5)")
+    pf.add_argument("--max-steps", type=int, default=400, help="solver step limit (default 400)")
+    pf.add_argument("--ignore-sigma", action="store_true", help="do not weight by the table's uncertainties")
+    pf.add_argument("--float32", action="store_true", help="fit in float32 (default: float64)")
+    pf.add_argument("--progress-every", type=int, default=10, metavar="K", help="print the loss every K steps")
+    pf.add_argument("--no-plots", action="store_true", help="write params.json and residuals.csv only")
+    pf.add_argument("--out", default="out/fit", help="report folder (default out/fit)")
+    pf.add_argument("--quiet", action="store_true", help="print only the result and the files written")
+    pf.set_defaults(fn=cmd_fit)
     pd = sub.add_parser("demo", help="evaluation demo of all BSDFs + a gradient")
     pd.add_argument("--out", default="out/demo")
     pd.set_defaults(fn=cmd_demo)
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = p.parse_args(argv)
+    args._argv = argv
     try:
         return args.fn(args)
-    except (ValueError, KeyError) as e:
-        print(f"appearance-jax {args.cmd}: error: {e}", file=sys.stderr)
+    except (ValueError, KeyError, OSError) as e:  # TableError is a ValueError; OSError: missing file, unwritable --out
+        msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)  # KeyError's str() adds quotes
+        print(f"appearance-jax {args.cmd}: error: {msg}", file=sys.stderr)
         return 2
 
 

@@ -61,6 +61,10 @@ CASES = {
                                  in_plane_table),
     "rough_dielectric-in_plane": ("rough_dielectric", dict(alpha=0.2, eta=1.6), dict(alpha=0.3, eta=1.4), None,
                                   in_plane_table),
+    "rough_conductor+lambert-gonio": ("rough_conductor+lambert",
+                                      dict(alpha=0.3, specular_reflectance=(0.5, 0.4, 0.3), reflectance=(0.3, 0.2, 0.6)),
+                                      dict(alpha=0.2, specular_reflectance=(0.3, 0.3, 0.3), reflectance=(0.4, 0.4, 0.4)),
+                                      ["eta", "k"], gonio_table),
     "rough_plastic-in_plane": ("rough_plastic", dict(alpha=0.15, diffuse_reflectance=(0.5, 0.3, 0.2)),
                                dict(alpha=0.2, diffuse_reflectance=(0.3, 0.3, 0.3)),
                                ["eta", "specular_reflectance"], in_plane_table),
@@ -212,3 +216,16 @@ def test_stochastic_model_is_fitted_with_common_random_numbers():
     np.testing.assert_allclose(a.x, np.array([0.6, 0.5, 0.4]) / scale, rtol=1e-8)
     c = fit(model, t, key=jax.random.PRNGKey(8))
     assert np.max(np.abs(c.x - a.x)) > 1e-4  # another key is another (consistent) estimator
+
+
+def test_degenerate_parameters_are_reported_as_poorly_determined():
+    """lambert + lambert: only the sum of the two albedos is determined (a flat direction)."""
+    model = registry.get("lambert+lambert")
+    lam = registry.get("lambert")
+    table = synth(lam, lam.Params(reflectance=0.6), gonio_table(), seed=3)
+    res = fit(model, table, init=model.Params(reflectance=0.2, lambert_1_reflectance=0.3))
+    assert set(res.poorly_determined) == set(res.labels), res.summary()
+    assert np.all(np.isnan(res.sigma))
+    np.testing.assert_allclose(res.x[:3] + res.x[3:], 0.6, atol=4.5 * 0.02 * 0.6 / np.sqrt(315))
+    # a well-posed fit of the same table flags nothing
+    assert not fit(lam, table).poorly_determined

@@ -152,28 +152,37 @@ def build_problem(model, table: Table, *, init=None, fix=None, metric="l2", weig
 # solvers
 
 
-def _progress(every: int) -> Callable:
-    """An optimistix ``verbose`` callable printing step and loss every ``every`` steps."""
+def _progress(every: int, n_valid: int = 1) -> Callable:
+    """An optimistix ``verbose`` callable printing step and loss every ``every`` steps.
+
+    The loss printed is the one :class:`FitResult` reports: the mean squared residual over the
+    ``n_valid`` fitted values. Printing is filtered on the host (a ``lax.cond`` would run both
+    branches under the ``vmap`` over starts); with several starts the best current loss is shown.
+    """
+
+    def host(step, loss):
+        step, loss = np.ravel(np.asarray(step)), np.ravel(np.asarray(loss, np.float64))
+        if step.size and step[0] > 0 and step[0] % every == 0:
+            print(f"  step {int(step[0]):4d}  loss {2.0 * np.nanmin(loss) / max(n_valid, 1):.6e}", flush=True)
 
     def show(**kw):
-        step = kw.get("num_steps", (None, 0))[1]
+        if "num_steps" not in kw:
+            return
         loss = None
         for k in ("loss_last_accepted_step", "loss", "loss_this_step"):
             if k in kw:
                 loss = kw[k][1]
                 break
-        if loss is None:
-            return
-        jax.lax.cond(step % every == 0, lambda: jax.debug.print("  step {s:4d}  loss {l:.6e}", s=step, l=loss),
-                     lambda: None)
+        if loss is not None:
+            jax.debug.callback(host, kw["num_steps"][1], loss)
 
     return show
 
 
-def _make_solver(name, rtol, atol, verbose):
+def _make_solver(name, rtol, atol, verbose, n_valid=1):
     import optimistix as optx
 
-    v = _progress(verbose) if verbose else False
+    v = _progress(verbose, n_valid) if verbose else False
     if name == "lm":
         return optx.LevenbergMarquardt(rtol=rtol, atol=atol, verbose=v)
     if name == "gn":
@@ -199,7 +208,7 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
         return z, 0.5 * jnp.sum(r * r), state.iter_num, jnp.all(jnp.isfinite(z))
     import optimistix as optx
 
-    opt = _make_solver(solver, rtol, atol, verbose)
+    opt = _make_solver(solver, rtol, atol, verbose, int(np.sum(np.asarray(problem.data["weight"]) > 0)))
     if solver == "bfgs":
         sol = optx.minimise(lambda z, d: 0.5 * jnp.sum(fn(z, d) ** 2), opt, z0, data, max_steps=max_steps,
                             throw=False)
@@ -267,6 +276,7 @@ class FitResult:
     table: Table | None = None
     fitted: np.ndarray | None = None  # model BRDF (N, B) at the table's directions
     compile_time: float = 0.0  # seconds spent tracing and compiling the solve
+    fit_mask: np.ndarray | None = None  # (N, B) True for the entries the fit used (after every mask and weight)
 
     @property
     def values(self) -> dict:
@@ -355,7 +365,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
         poorly_determined=tuple(lab for lab, b in zip(sp.labels, flat) if b), eigenvalues=lam,
         loss=float(2.0 * loss_half / max(m, 1)), metrics=metrics, iterations=int(steps), wall_time=float(wall),
         converged=bool(ok), solver=solver, metric=problem.metric, n_valid=m, masked=problem.masked,
-        fixed=_fixed_record(sp), starts=starts or {}, table=table, fitted=fitted)
+        fixed=_fixed_record(sp), starts=starts or {}, table=table, fitted=fitted, fit_mask=w)
 
 
 def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights=None,
