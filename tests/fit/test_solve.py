@@ -229,3 +229,17 @@ def test_degenerate_parameters_are_reported_as_poorly_determined():
     np.testing.assert_allclose(res.x[:3] + res.x[3:], 0.6, atol=4.5 * 0.02 * 0.6 / np.sqrt(315))
     # a well-posed fit of the same table flags nothing
     assert not fit(lam, table).poorly_determined
+
+
+def test_spectral_table_fits_band_parameters_per_wavelength():
+    """A 5-wavelength table: band fields are fitted per wavelength; fixed 3-band fields are refused."""
+    wl = np.array([450.0, 500.0, 550.0, 600.0, 650.0])
+    ti, to = in_plane_angles([0, 30, 60], np.arange(-60, 61, 15))
+    rho = np.array([0.1, 0.2, 0.4, 0.6, 0.7])
+    t = Table.in_plane(ti, to, np.broadcast_to(rho / np.pi, (ti.size, 5)), bands=tuple(f"{w:g}" for w in wl),
+                       wavelengths=wl)
+    res = fit("lambert", t)
+    assert res.labels[0] == "reflectance[450]" and len(res.labels) == 5
+    np.testing.assert_allclose(res.x, rho, rtol=1e-8)
+    with pytest.raises(ValueError, match="eta \\(fixed\\) has 3 bands but the table has 5"):
+        fit("rough_conductor", t, fix=["eta", "k"])

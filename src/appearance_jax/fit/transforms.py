@@ -113,12 +113,18 @@ class ParamSpace:
         for k in fix:
             if not isinstance(specs[k], ParamSpec):
                 raise ValueError(f"fix: {k} is a static (configuration) field; set it in the start parameters instead")
+        band_names = tuple(band_names) if band_names is not None else tuple(str(i) for i in range(n_bands))
         values = {k: v for k, v in fix.items() if v is not None}
         params = params.replace(**values) if values else params
         validate(params)
-        band_names = tuple(band_names) if band_names is not None else tuple(str(i) for i in range(n_bands))
         free, start = [], {}
         for name, spec in specs.items():
+            if isinstance(spec, ParamSpec) and spec.bands and name in fix:
+                v = getattr(params, name)
+                n = np.shape(v)[-1] if np.ndim(v) else 1
+                if v is not None and n not in (1, n_bands):
+                    raise ValueError(f"{name} (fixed) has {n} bands but the table has {n_bands}: give one value "
+                                     f"or one per band ({', '.join(band_names[:4])}{', ...' if n_bands > 4 else ''})")
             if not isinstance(spec, ParamSpec) or name in fix:
                 continue
             v = getattr(params, name)
