@@ -16,7 +16,6 @@ import pytest
 from appearance_jax import registry
 from appearance_jax.fit.batch import fit_batch
 from appearance_jax.fit.grids import in_plane_angles
-from appearance_jax.fit.solve import fit
 from appearance_jax.fit.table import Table
 
 SCRIPT = textwrap.dedent("""

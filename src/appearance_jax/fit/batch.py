@@ -19,6 +19,7 @@ Test on CPU with ``XLA_FLAGS=--xla_force_host_platform_device_count=2``.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from dataclasses import dataclass
 
@@ -26,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .solve import FitResult, build_problem, covariance, finish, flags, solve_z, SOLVERS
+from .solve import SOLVERS, FitResult, build_problem, covariance, entry_arrays, finish, flags, solve_z
 from .table import Table
 
 
@@ -52,6 +53,7 @@ class BatchFitResult:
     _problem: object = None
     _z: np.ndarray | None = None
     _data: dict | None = None
+    _masked: list | None = None  # per item: reason -> count
 
     def __len__(self) -> int:
         return self.x.shape[0]
@@ -59,7 +61,8 @@ class BatchFitResult:
     def item(self, k: int) -> FitResult:
         """The full :class:`FitResult` of item k (recomputes its covariance and error metrics)."""
         data = {n: (v if n in ("wi", "wo", "cos_i") else v[k]) for n, v in self._data.items()}
-        r = finish(self._problem, None, self._z[k], 0.5 * self.loss[k] * max(int((np.asarray(data["weight"]) > 0).sum()), 1),
+        problem = dataclasses.replace(self._problem, masked=self._masked[k])
+        r = finish(problem, None, self._z[k], 0.5 * self.loss[k] * max(int((np.asarray(data["weight"]) > 0).sum()), 1),
                    self.iterations[k], self.converged[k], self.wall_time, self.solver, data=data)
         return r
 
@@ -88,22 +91,34 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     if sigma is not None:
         sigma = np.broadcast_to(np.asarray(sigma, np.float64), values.shape)
 
-    # One problem per item only to reuse the single-table checks and scaling; cheap (numpy).
-    items = []
-    for k in range(K):
-        tk = table.replace(values=values[k], mask=base[k], sigma=None if sigma is None else sigma[k],
-                           source=f"{table.source}[{k}]")
-        items.append(build_problem(model, tk, init=init, fix=fix, metric=metric, weights=weights,
-                                   max_theta_deg=max_theta_deg, key=key, model_kwargs=model_kwargs))
-    problem = items[0]
+    # The model, the free parameters, the directions and cos theta_i are shared: one problem (on
+    # item 0) carries them; the per-entry arrays of all K items are prepared in one numpy pass.
+    problem = build_problem(model, table.replace(values=values[0], mask=base[0],
+                                                 sigma=None if sigma is None else sigma[0]),
+                            init=init, fix=fix, metric=metric, weights=weights, max_theta_deg=max_theta_deg,
+                            key=key, model_kwargs=model_kwargs)
     sp = problem.space
+    f, inv, weight, extra, _ = entry_arrays(table, values, sigma, base, metric=metric, weights=weights,
+                                            max_theta_deg=max_theta_deg, use_sigma=True, floor=problem.floor)
+    n_valid = (weight > 0).sum(axis=(1, 2))
+    if np.any(n_valid < sp.size):
+        k = int(np.argmin(n_valid))
+        raise ValueError(f"{table.source}[{k}]: {int(n_valid[k])} valid values for {sp.size} free parameters "
+                         f"({', '.join(sp.labels)})")
+    masked = [dict(table.masked) for _ in range(K)]
+    missing = (~np.isfinite(values) & table.mask).sum(axis=(1, 2))
+    for k in range(K):
+        if missing[k]:
+            masked[k]["missing value"] = masked[k].get("missing value", 0) + int(missing[k])
+        masked[k].update({why: int(n[k]) for why, n in extra.items() if n[k]})
     devs = list(devices) if devices is not None else jax.devices()
     n_dev = len(devs)
     pad = (-K) % n_dev
-    idx = list(range(K)) + [K - 1] * pad
+    idx = np.array(list(range(K)) + [K - 1] * pad)
     per_item = ("f", "inv_scale", "weight")
-    data = {n: (problem.data[n] if n not in per_item else jnp.stack([items[i].data[n] for i in idx]))
-            for n in problem.data}
+    dt = jnp.result_type(float)
+    stacked = dict(f=f, inv_scale=inv, weight=weight)
+    data = {n: (problem.data[n] if n not in per_item else jnp.asarray(stacked[n][idx], dt)) for n in problem.data}
     z0 = jnp.asarray(sp.z_from_x(sp.x_start()), jnp.result_type(float))
     z0 = jnp.broadcast_to(z0, (len(idx), z0.shape[0]))
 
@@ -131,10 +146,9 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     z, x, sig, lam, vec, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1
     z, x, sig, lam, vec, loss, steps, ok = (np.asarray(a)[:K] for a in (z, x, sig, lam, vec, loss, steps, ok))
-    n_valid = np.array([max(int((np.asarray(it.data["weight"]) > 0).sum()), 1) for it in items])
     bound, flat = flags(sp, x, sig, lam, vec)
     data_k = {n: (v if n not in per_item else np.asarray(v)[:K]) for n, v in data.items()}
     return BatchFitResult(model=problem.model.name, labels=sp.labels, units=sp.units(), x=x, sigma=sig,
-                          loss=2.0 * loss / n_valid, iterations=steps, converged=ok, at_bound=bound,
+                          loss=2.0 * loss / np.maximum(n_valid, 1), iterations=steps, converged=ok, at_bound=bound,
                           poorly_determined=flat, wall_time=wall, compile_time=t1 - t0, n_devices=n_dev,
-                          solver=solver, metric=metric, _problem=problem, _z=z, _data=data_k)
+                          solver=solver, metric=metric, _problem=problem, _z=z, _data=data_k, _masked=masked)

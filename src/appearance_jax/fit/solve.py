@@ -38,7 +38,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.params import param_specs, validate
+from ..core.params import validate
 from .residuals import check_metric, error_metrics, residual, residual_scale
 from .table import Table
 from .transforms import ParamSpace
@@ -95,6 +95,43 @@ def _sigma_scale(metric, f, sigma, cos_i, floor):
     return np.where(np.isfinite(s) & (s > 0), 1.0 / np.where(s > 0, s, 1.0), 0.0)
 
 
+def entry_arrays(table: Table, values, sigma, mask, *, metric, weights, max_theta_deg, use_sigma, floor):
+    """Per-entry data of a fit, in numpy: ``(f, inv_scale, weight, masked, absolute)``.
+
+    ``values``, ``sigma`` (or None) and ``mask`` are in the table's quantity with its (N, B)
+    shape, optionally with leading batch axes (K, N, B) on the table's angles, so that a batch
+    is prepared in one vectorised pass. ``f`` is the BRDF (0 where not fitted), ``weight`` =
+    sqrt(sample weight) x mask, ``masked`` maps each reason added here (grazing, bad sigma) to
+    its count: an int, or a (K,) array with a batch axis.
+    """
+    k = table.brdf_factor()
+    f = np.asarray(values, np.float64) * k
+    sigma = None if sigma is None else np.asarray(sigma, np.float64) * k
+    mask = np.asarray(mask, bool) & np.isfinite(f)
+    masked = {}
+    if max_theta_deg is not None:
+        lim = np.deg2rad(max_theta_deg)
+        grazing = ((table.theta_i > lim) | (table.theta_o > lim))[:, None] & mask
+        if grazing.any():
+            masked[f"grazing (theta > {max_theta_deg:g} deg)"] = grazing.sum(axis=(-2, -1))
+            mask &= ~grazing
+    cos_i = np.cos(table.theta_i)[:, None]
+    w = np.ones_like(f) if weights is None else np.broadcast_to(np.asarray(weights, np.float64), f.shape)
+    if np.any(~np.isfinite(w)) or np.any(w < 0):
+        raise ValueError("weights must be finite and >= 0")
+    if use_sigma and sigma is not None:
+        bad = mask & ~(np.isfinite(sigma) & (sigma > 0))
+        if bad.any():
+            masked["sigma <= 0 or missing"] = bad.sum(axis=(-2, -1))
+            mask &= ~bad
+        inv = _sigma_scale(metric, np.where(mask, f, 0.0), np.where(mask, sigma, 1.0), cos_i, floor)
+        absolute = True
+    else:
+        inv, absolute = np.ones_like(f), False
+    weight = np.where(mask, np.sqrt(w), 0.0)
+    return np.where(mask, f, 0.0), inv, weight, masked, absolute
+
+
 def build_problem(model, table: Table, *, init=None, fix=None, metric="l2", weights=None,
                   max_theta_deg: float | None = 85.0, use_sigma: bool = True, floor: float = 1e-3,
                   key=None, model_kwargs=None) -> Problem:
@@ -114,36 +151,19 @@ def build_problem(model, table: Table, *, init=None, fix=None, metric="l2", weig
     validate(params, model.Params)
     space = ParamSpace(params, table.n_bands, fix=fix, band_names=table.bands)
 
-    f, sigma = table.brdf()
-    mask = table.mask.copy()
+    f, inv, weight, extra, absolute = entry_arrays(table, table.values, table.sigma, table.mask, metric=metric,
+                                                    weights=weights, max_theta_deg=max_theta_deg,
+                                                    use_sigma=use_sigma, floor=floor)
     masked = dict(table.masked)
-    if max_theta_deg is not None:
-        lim = np.deg2rad(max_theta_deg)
-        grazing = ((table.theta_i > lim) | (table.theta_o > lim))[:, None] & mask
-        if grazing.any():
-            masked[f"grazing (theta > {max_theta_deg:g} deg)"] = int(grazing.sum())
-            mask &= ~grazing
-    cos_i = np.cos(table.theta_i)[:, None]
-    w = np.ones_like(f) if weights is None else np.broadcast_to(np.asarray(weights, np.float64), f.shape)
-    if np.any(~np.isfinite(w)) or np.any(w < 0):
-        raise ValueError("weights must be finite and >= 0")
-    if use_sigma and sigma is not None:
-        bad = mask & ~(np.isfinite(sigma) & (sigma > 0))
-        if bad.any():
-            masked["sigma <= 0 or missing"] = int(bad.sum())
-            mask &= ~bad
-        inv = _sigma_scale(metric, np.where(mask, f, 0.0), np.where(mask, sigma, 1.0), cos_i, floor)
-        absolute = True
-    else:
-        inv, absolute = np.ones_like(f), False
-    weight = np.where(mask, np.sqrt(w), 0.0)
+    masked.update({why: int(n) for why, n in extra.items() if n})
     n_valid = int((weight > 0).sum())
     if n_valid < space.size:
         raise ValueError(f"{table.source}: {n_valid} valid values for {space.size} free parameters "
                          f"({', '.join(space.labels)}); masked: {masked or 'none'}")
+    cos_i = np.cos(table.theta_i)[:, None]
     dt = jnp.result_type(float)
     wi, wo = table.directions(dt)
-    data = dict(wi=wi, wo=wo, f=jnp.asarray(np.where(mask, f, 0.0), dt), inv_scale=jnp.asarray(inv, dt),
+    data = dict(wi=wi, wo=wo, f=jnp.asarray(f, dt), inv_scale=jnp.asarray(inv, dt),
                 weight=jnp.asarray(weight, dt), cos_i=jnp.asarray(cos_i, dt))
     return Problem(model, space, data, metric, floor, key, dict(model_kwargs or {}), absolute, masked)
 
@@ -421,5 +441,5 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     return res
 
 
-__all__ = ["fit", "build_problem", "solve_z", "covariance", "finish", "FitResult", "Problem", "SOLVERS"]
-_ = param_specs  # re-exported convenience for notebooks (field specs of a model)
+__all__ = ["fit", "build_problem", "entry_arrays", "solve_z", "covariance", "finish", "FitResult", "Problem",
+           "SOLVERS"]
