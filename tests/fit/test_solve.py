@@ -243,3 +243,57 @@ def test_spectral_table_fits_band_parameters_per_wavelength():
     np.testing.assert_allclose(res.x, rho, rtol=1e-8)
     with pytest.raises(ValueError, match="eta \\(fixed\\) has 3 bands but the table has 5"):
         fit("rough_conductor", t, fix=["eta", "k"])
+
+
+def test_explicit_start_list_runs_one_start_each():
+    """init=[...]: one start per entry (plus n_starts - 1 random ones), the best one is kept."""
+    model = registry.get("rough_conductor")
+    truth = model.Params(alpha=0.2, eta=1.1, k=3.0)
+    table = synth(model, truth, gonio_table(), noise=0.0).replace(sigma=None)
+    starts = [model.Params(alpha=a, eta=1.1, k=3.0) for a in (1.5, 0.05, 0.7)]
+    res = fit(model, table, init=starts, fix=["eta", "k"])
+    assert res.starts["n_starts"] == 3 and len(res.starts["losses"]) == 3
+    np.testing.assert_allclose(res.params.alpha, 0.2, rtol=1e-6)
+    res = fit(model, table, init=starts[:2], fix=["eta", "k"], n_starts=3)
+    assert res.starts["n_starts"] == 4
+    with pytest.raises(ValueError, match="empty"):
+        fit(model, table, init=[])
+    with pytest.raises(ValueError, match="preset 'nope'"):
+        fit(model, table, init=[starts[0], "nope"])
+
+
+def _toy_spectral_model():
+    """f = w(lambda) / pi with w = lambda / 1000: a model with static color/wavelengths fields."""
+    from appearance_jax.core import spectral
+    from appearance_jax.core.params import param, params_class, static
+
+    @params_class
+    class P:
+        scale: object = param(1.0, lo=0.0, hi=10.0)
+        color: str = static("rgb3", choices=spectral.COLOR_MODES)
+        wavelengths: tuple = static(spectral.RGB_WAVELENGTHS, convert=spectral.wavelengths_tuple)
+
+    def kernel(p, wi, wo):
+        wl = spectral.band_wavelengths(p.color, p.wavelengths)
+        v = p.scale * wl / 1000.0 / jnp.pi * jnp.ones(jnp.shape(wi.z) + (1,))
+        return spectral.to_bands(v, p.color, p.wavelengths)
+
+    return Model("toy_spectral", "bsdf", P, boundary(kernel, P), None, None, "toy", "test")
+
+
+def test_spectral_table_sets_the_model_wavelengths():
+    model = _toy_spectral_model()
+    wl = np.array([420.0, 500.0, 610.0, 700.0])
+    ti, to = in_plane_angles([0, 30], np.arange(-60, 61, 30))
+    t = Table.in_plane(ti, to, np.broadcast_to(0.7 * wl / 1000 / np.pi, (ti.size, 4)),
+                       bands=tuple(f"{w:g}" for w in wl), wavelengths=wl)
+    res = fit(model, t)
+    assert res.params.color == "spectral" and res.params.wavelengths == tuple(wl)
+    np.testing.assert_allclose(res.params.scale, 0.7, rtol=1e-8)
+    # an RGB table keeps rgb3 (650/510/475 nm) and refuses "spectral"
+    rgb = Table.in_plane(ti, to, np.broadcast_to(0.5 * np.array([650.0, 510, 475]) / 1000 / np.pi, (ti.size, 3)))
+    np.testing.assert_allclose(fit(model, rgb).params.scale, 0.5, rtol=1e-8)
+    with pytest.raises(ValueError, match="color = 'spectral'"):
+        fit(model, rgb, init=model.Params(color="spectral"))
+    with pytest.raises(ValueError, match="wavelengths"):
+        model.Params(wavelengths=(500.0, -1.0))

@@ -60,6 +60,9 @@ class StaticSpec:
 
     choices: tuple | None = None
     doc: str = ""
+    # called on the value at construction: returns the normalised (hashable) value or raises
+    # ValueError naming the problem (e.g. wavelengths must be positive)
+    convert: Any = None
 
 
 def _fmt(x: float) -> str:
@@ -76,9 +79,14 @@ def param(default, *, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False, u
     return dataclasses.field(default=default, metadata={_META_KEY: spec})
 
 
-def static(default, *, choices=None, doc=""):
-    """Declare a static configuration field (hashable; not a pytree leaf)."""
-    spec = StaticSpec(tuple(choices) if choices is not None else None, doc)
+def static(default, *, choices=None, doc="", convert=None):
+    """Declare a static configuration field (hashable; not a pytree leaf).
+
+    ``convert(value)`` (optional) normalises the value at construction (e.g. a list of
+    wavelengths to a tuple of floats) and raises ``ValueError`` for invalid values; the
+    error is re-raised naming the class and the field.
+    """
+    spec = StaticSpec(tuple(choices) if choices is not None else None, doc, convert)
     return dataclasses.field(default=default, metadata={_META_KEY: spec})
 
 
@@ -105,6 +113,12 @@ def params_class(cls):
         for name in klass._static_fields:
             spec = klass.__dataclass_fields__[name].metadata[_META_KEY]
             v = getattr(self, name)
+            if spec.convert is not None:
+                try:
+                    v = spec.convert(v)
+                except (TypeError, ValueError) as e:
+                    raise ValueError(f"{klass.__name__}.{name} = {v!r}: {e}") from None
+                object.__setattr__(self, name, v)
             if spec.choices is not None and v not in spec.choices:
                 raise ValueError(
                     f"{klass.__name__}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"

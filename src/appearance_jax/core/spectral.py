@@ -38,6 +38,14 @@ import numpy as np
 
 RGB_WAVELENGTHS = (650.0, 510.0, 475.0)  # nm, [T:526] of seed 000 (snake-skin thin film)
 
+# How a wavelength-dependent model (thin films) produces its output bands:
+#   "rgb3":     3 bands R, G, B, one wavelength each (RGB_WAVELENGTHS; the thesis' cheap mode)
+#   "cie":      3 bands of linear sRGB: the spectrum on CIE_GRID_NM integrated with the CIE 1931
+#               colour-matching functions under D65 (a perfect reflector -> (1, 1, 1))
+#   "spectral": one band per wavelength of the model's ``wavelengths`` field (nm)
+COLOR_MODES = ("rgb3", "cie", "spectral")
+CIE_GRID_NM = (380.0, 780.0, 5.0)  # start, stop, step: 5 nm as Huang 2022 [T:742] of seed 001
+
 CMFS_NAME = "CIE 1931 2 Degree Standard Observer"
 
 # sRGB primaries and white point (IEC 61966-2-1:1999), CIE xy chromaticities
@@ -54,6 +62,42 @@ def wavelength_grid(start: float = 360.0, stop: float = 830.0, step: float = 5.0
         raise ValueError(f"wavelength_grid: need step > 0 and stop >= start, got {start}, {stop}, {step}")
     n = int(np.floor((stop - start) / step + 1e-9)) + 1
     return jnp.asarray(start + step * np.arange(n), dtype=jnp.result_type(float))
+
+
+def wavelengths_tuple(v) -> tuple:
+    """Normalise a wavelength list (nm) to a tuple of floats; raise if not finite and > 0.
+
+    The ``convert`` hook of the static ``wavelengths`` field of spectral models.
+    """
+    a = np.atleast_1d(np.asarray(v, dtype=float))
+    if a.ndim != 1 or a.size == 0:
+        raise ValueError("need a non-empty 1-D list of wavelengths in nm")
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise ValueError("wavelengths must be finite and > 0 nm")
+    return tuple(float(x) for x in a)
+
+
+def band_wavelengths(color: str, wavelengths=RGB_WAVELENGTHS) -> jnp.ndarray:
+    """The wavelengths (nm) at which a model evaluates its spectrum for a colour mode."""
+    if color == "rgb3":
+        return jnp.asarray(RGB_WAVELENGTHS, dtype=jnp.result_type(float))
+    if color == "cie":
+        return wavelength_grid(*CIE_GRID_NM)
+    if color == "spectral":
+        return jnp.asarray(wavelengths, dtype=jnp.result_type(float))
+    raise ValueError(f"color = {color!r}: must be one of {', '.join(COLOR_MODES)}")
+
+
+def to_bands(values, color: str, wavelengths=RGB_WAVELENGTHS, illuminant: str = "D65") -> jnp.ndarray:
+    """Output bands of a spectrum sampled at :func:`band_wavelengths` (trailing axis).
+
+    "rgb3" and "spectral" return the samples as they are; "cie" returns linear sRGB of the
+    reflectance-type spectrum under ``illuminant`` (:func:`spectrum_to_linear_srgb`).
+    """
+    if color == "cie":
+        return spectrum_to_linear_srgb(values, band_wavelengths(color), illuminant)
+    band_wavelengths(color, wavelengths)  # validates the mode
+    return values
 
 
 # --------------------------------------------------------------------------------------

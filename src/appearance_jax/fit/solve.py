@@ -132,6 +132,37 @@ def entry_arrays(table: Table, values, sigma, mask, *, metric, weights, max_thet
     return np.where(mask, f, 0.0), inv, weight, masked, absolute
 
 
+def match_spectral_bands(params, table: Table):
+    """Point a wavelength-dependent model at a spectral table's wavelengths.
+
+    Models whose ``Params`` have the static fields ``color`` and ``wavelengths`` (thin films:
+    :data:`appearance_jax.core.spectral.COLOR_MODES`) evaluate one band per wavelength in
+    ``color="spectral"``; a spectral table switches them to that mode at its wavelengths.
+    An RGB table keeps the model's mode ("rgb3" or "cie"), but refuses "spectral".
+    """
+    names = getattr(type(params), "_static_fields", ())
+    if "color" not in names or "wavelengths" not in names:
+        return params
+    if table.wavelengths is not None:
+        return params.replace(color="spectral", wavelengths=tuple(float(w) for w in table.wavelengths))
+    if params.color == "spectral":
+        raise ValueError(f"{table.source}: the table is RGB ({', '.join(table.bands)}) but the model's "
+                         "color = 'spectral'; use color='rgb3' (650/510/475 nm) or 'cie'")
+    return params
+
+
+def _start_params(model, init):
+    """A start (Params or preset name) of ``model``, validated."""
+    if isinstance(init, str):
+        if init not in model.presets:
+            raise ValueError(f"preset {init!r} is not a preset of {model.name}; presets: "
+                             f"{', '.join(model.presets) or 'none'}")
+        init = model.presets[init]
+    params = init if init is not None else model.Params()
+    validate(params, model.Params)
+    return params
+
+
 def build_problem(model, table: Table, *, init=None, fix=None, metric="l2", weights=None,
                   max_theta_deg: float | None = 85.0, use_sigma: bool = True, floor: float = 1e-3,
                   key=None, model_kwargs=None) -> Problem:
@@ -142,13 +173,7 @@ def build_problem(model, table: Table, *, init=None, fix=None, metric="l2", weig
     if model.kind != "bsdf":
         raise ValueError(f"fit: {model.name} is a {model.kind}; tables are fitted with BSDFs")
     check_metric(metric)
-    if isinstance(init, str):
-        if init not in model.presets:
-            raise ValueError(f"preset {init!r} is not a preset of {model.name}; presets: "
-                             f"{', '.join(model.presets) or 'none'}")
-        init = model.presets[init]
-    params = init if init is not None else model.Params()
-    validate(params, model.Params)
+    params = match_spectral_bands(_start_params(model, init), table)
     space = ParamSpace(params, table.n_bands, fix=fix, band_names=table.bands)
 
     f, inv, weight, extra, absolute = entry_arrays(table, table.values, table.sigma, table.mask, metric=metric,
@@ -395,7 +420,9 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     """Fit ``model`` (a registered name or Model) to ``table``.
 
     Args:
-        init: start ``Params`` or a preset name (default: the model's defaults).
+        init: start ``Params`` or a preset name (default: the model's defaults), or a list of
+            them: one start each (e.g. thicknesses spread over one period of a thin film's
+            optical thickness); fixed fields and static settings come from the first.
         fix: names to hold at their start value, or {name: value}.
         metric: ``"l2"`` | ``"cos_log"`` | ``"relative"`` (:mod:`~appearance_jax.fit.residuals`).
         weights: per-sample weights broadcastable to (N, B).
@@ -410,13 +437,21 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if n_starts < 1:
         raise ValueError(f"n_starts = {n_starts} must be >= 1")
+    inits = list(init) if isinstance(init, (list, tuple)) else [init]
+    if not inits:
+        raise ValueError("init: an empty list of starts")
+    init = inits[0]
     problem = build_problem(model, table, init=init, fix=fix, metric=metric, weights=weights,
                             max_theta_deg=max_theta_deg, use_sigma=use_sigma, key=key, model_kwargs=model_kwargs)
     sp = problem.space
     dt = jnp.result_type(float)
     z0 = jnp.asarray(sp.z_from_x(sp.x_start()), dt)[None]
-    if n_starts > 1:
-        z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - 1).astype(dt)])
+    if len(inits) > 1:
+        more = [_start_params(problem.model, p) for p in inits[1:]]
+        z0 = jnp.concatenate([z0] + [jnp.asarray(sp.z_from_x(sp.x_from_params(p)), dt)[None] for p in more])
+    n_starts = n_starts + len(inits) - 1
+    if n_starts > len(inits):
+        z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - len(inits)).astype(dt)])
 
     def run(z0s, data):
         return jax.vmap(lambda z: solve_z(problem, z, data, solver=solver, rtol=rtol, atol=atol,

@@ -51,25 +51,73 @@ def fresnel_dielectric_amplitudes(cos_i, eta):
     return r_s, r_p, t_s, t_p
 
 
+def normal_index(eta, eta0_sin0):
+    """q = eta cos(theta) in a layer of (complex) index ``eta``, from Snell's invariant.
+
+    ``eta0_sin0`` = eta_0 sin(theta_0) is conserved across parallel interfaces, so
+    q = sqrt(eta^2 - (eta_0 sin theta_0)^2). The branch is the forward one (the wave
+    travels or decays away from the incidence side): Im q > 0, or q >= 0 when q is real.
+    A plain principal sqrt would pick -i|q| for a negative argument carrying a -0
+    imaginary part (evanescent waves growing instead of decaying).
+
+    q = 0 exactly (a layer hit exactly at its critical angle, or an index-matched layer at
+    grazing incidence) is replaced by q = sqrt(machine epsilon): there the Airy formula is
+    0/0 with a finite limit (r_01 -> 1, r_12 -> -1, phase -> 0), and the sqrt has an
+    infinite derivative. The nudge keeps values continuous (error ~ sqrt(eps), 1e-8 in
+    float64) and gradients finite instead of NaN.
+    """
+    eta = jnp.asarray(eta) + 0j
+    arg = eta * eta - (jnp.asarray(eta0_sin0) + 0j) ** 2
+    tiny = jnp.finfo(jnp.real(arg).dtype).eps
+    q = jnp.sqrt(jnp.where(arg == 0, tiny + 0j, arg))
+    flip = (q.imag < 0) | ((q.imag == 0) & (q.real < 0))
+    return jnp.where(flip, -q, q)
+
+
+def interface_amplitudes(q_i, q_t, eta_i, eta_t):
+    """Complex ``(r_s, r_p, t_s, t_p)`` of one interface from q = eta cos(theta) on each side.
+
+    Same convention as the cos form in the module docstring (multiply numerator and
+    denominator of the p terms by eta_i eta_t):
+
+        r_s = (q_i - q_t) / (q_i + q_t),              t_s = 2 q_i / (q_i + q_t)
+        r_p = (eta_t^2 q_i - eta_i^2 q_t) / (eta_t^2 q_i + eta_i^2 q_t)
+        t_p = 2 eta_i eta_t q_i / (eta_t^2 q_i + eta_i^2 q_t)
+
+    It is the building block of the thin-film and multilayer solvers
+    (:mod:`appearance_jax.optics.thinfilm`). A zero denominator (grazing incidence on an
+    index-matched interface) gives r = 0, t = 1.
+    """
+    eta_i = jnp.asarray(eta_i) + 0j
+    eta_t = jnp.asarray(eta_t) + 0j
+    ei2, et2 = eta_i * eta_i, eta_t * eta_t
+    ds = q_i + q_t
+    dp = et2 * q_i + ei2 * q_t
+    ok_s, ok_p = ds != 0, dp != 0
+    ds = jnp.where(ok_s, ds, 1.0)
+    dp = jnp.where(ok_p, dp, 1.0)
+    r_s = jnp.where(ok_s, (q_i - q_t) / ds, 0j)
+    r_p = jnp.where(ok_p, (et2 * q_i - ei2 * q_t) / dp, 0j)
+    t_s = jnp.where(ok_s, 2.0 * q_i / ds, 1.0 + 0j)
+    t_p = jnp.where(ok_p, 2.0 * eta_i * eta_t * q_i / dp, 1.0 + 0j)
+    return r_s, r_p, t_s, t_p
+
+
 def fresnel_amplitudes_complex(cos_i, eta_i, eta_t):
     """Complex amplitudes ``(r_s, r_p, t_s, t_p, cos_t)`` for complex indices.
 
-    ``eta_i`` and ``eta_t`` may be complex (n + i k, absorbing media). cos_t is the complex
-    principal-branch sqrt(1 - (eta_i/eta_t)^2 (1 - cos_i^2)), which also gives the
-    evanescent solution (|r| = 1) under total internal reflection.
+    ``eta_i`` and ``eta_t`` may be complex (n + i k, absorbing media); ``eta_i`` should be
+    real (or weakly absorbing) for ``cos_i`` to mean an angle. cos_t = q_t / eta_t with the
+    forward branch of :func:`normal_index`, which also gives the evanescent solution
+    (|r| = 1) under total internal reflection.
     """
     cos_i = jnp.asarray(cos_i).astype(jnp.result_type(cos_i, jnp.complex64))
     eta_i = jnp.asarray(eta_i) + 0j
     eta_t = jnp.asarray(eta_t) + 0j
-    ratio = eta_i / eta_t
-    cos_t = jnp.sqrt(1.0 - ratio * ratio * (1.0 - cos_i * cos_i))
-    ds = eta_i * cos_i + eta_t * cos_t
-    dp = eta_t * cos_i + eta_i * cos_t
-    r_s = (eta_i * cos_i - eta_t * cos_t) / ds
-    r_p = (eta_t * cos_i - eta_i * cos_t) / dp
-    t_s = 2.0 * eta_i * cos_i / ds
-    t_p = 2.0 * eta_i * cos_i / dp
-    return r_s, r_p, t_s, t_p, cos_t
+    q_i = eta_i * cos_i
+    q_t = normal_index(eta_t, eta_i * jnp.sqrt(1.0 - cos_i * cos_i))
+    r_s, r_p, t_s, t_p = interface_amplitudes(q_i, q_t, eta_i, eta_t)
+    return r_s, r_p, t_s, t_p, q_t / eta_t
 
 
 def fresnel_dielectric(cos_i, eta):
