@@ -8,9 +8,8 @@ term taken at the microfacet angle wi.h), for wi, wo both above the surface, els
 D and G2 come from :mod:`appearance_jax.microfacet.distribution`; F is the exact
 unpolarised conductor reflectance (:func:`~appearance_jax.optics.fresnel.fresnel_conductor`).
 
-Sampling: visible normals of wi (Heitz 2018 for GGX, CDF inversion for Beckmann), then
-mirror: pdf(wi, wo) = G1(wi, h) D(h) / (4 cos theta_i) = D(h) / (4 mu(wi)) (Heitz 2014;
-the reflection Jacobian 1/(4 |wo.h|), Walter et al. 2007, Eq. 14) and
+Sampling: visible normals of wi, then mirror (:mod:`appearance_jax.microfacet.cook_torrance`,
+shared with the other microfacet reflectors): pdf(wi, wo) = D(h) / (4 mu(wi)) and
 weight = f cos theta_o / pdf = R F G2 / G1(wi).
 ``sample(params, wi, u_or_key)`` takes a PRNG key or 2 uniform arrays (the visible normal).
 
@@ -42,13 +41,12 @@ returns f cos theta_o where ours returns f.
 
 from __future__ import annotations
 
-import jax.numpy as jnp
+import functools
 
-from ..core.frame import reflect
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import param, params_class, static
-from ..core.rng import uniforms
-from ..core.vec import Vec3, dot, normalize
+from ..core.vec import Vec3
+from ..microfacet import cook_torrance as ct
 from ..microfacet import distribution as md
 from ..optics.fresnel import fresnel_conductor
 
@@ -68,71 +66,22 @@ class Params:
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 form")
 
 
-def _alphas(p: Params):
-    ax = jnp.asarray(p.alpha)
-    ay = ax if p.alpha_v is None else jnp.asarray(p.alpha_v)
-    return ax, ay
-
-
 def _fresnel(p: Params, cos_h):
     """R * F(cos_h) over the bands axis."""
     eta, k, r = as_bands(p.eta), as_bands(p.k), as_bands(p.specular_reflectance)
     return r * fresnel_conductor(with_bands(cos_h), eta, k)
 
 
-def _half(wi: Vec3, wo: Vec3):
-    return normalize(wi + wo)
-
-
 def _eval(p: Params, wi: Vec3, wo: Vec3):
-    ax, ay = _alphas(p)
-    kind = p.distribution
-    active = (wi.z > 0) & (wo.z > 0)
-    h = _half(wi, wo)
-    D = md.D(kind, h, ax, ay)
-    G = md.G2(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated",
-                reflection_only=True)
-    den = 4.0 * wi.z * wo.z
-    ok = active & (den > 0)
-    # safe-where: the masked branch divides by 1, so gradients stay finite at grazing
-    base = jnp.where(ok, D * G / jnp.where(ok, den, 1.0), 0.0)
-    F = _fresnel(p, jnp.clip(dot(wi, h), 0.0, 1.0))
-    return with_bands(base) * F
-
-
-def _pdf_from_half(p: Params, wi: Vec3, h: Vec3, ok):
-    """pdf(wo) = pdf_visible(wi, h) / (4 |wi.h|) = D(h) / (4 mu(wi)) where valid."""
-    ax, ay = _alphas(p)
-    kind = p.distribution
-    mu = md.projected_area(kind, wi, ax, ay)
-    ok = ok & (dot(wi, h) > 0)
-    return jnp.where(ok, md.D(kind, h, ax, ay) / (4.0 * mu), 0.0)
+    return ct.reflection(p, wi, wo, functools.partial(_fresnel, p))
 
 
 def _pdf(p: Params, wi: Vec3, wo: Vec3):
-    active = (wi.z > 0) & (wo.z > 0)
-    return _pdf_from_half(p, wi, _half(wi, wo), active)
+    return ct.pdf(p, wi, wo)
 
 
 def _sample(p: Params, wi: Vec3, u):
-    ax, ay = _alphas(p)
-    kind = p.distribution
-    shape = jnp.broadcast_shapes(jnp.shape(wi.z), jnp.shape(ax), jnp.shape(ay))
-    u1, u2 = uniforms(u, shape, 2)
-    m = md.sample_visible(kind, wi, ax, ay, u1, u2)
-    wo = reflect(wi, m)
-    ok = (wi.z > 0) & (wo.z > 0) & (dot(wi, m) > 0)
-    pdf = _pdf_from_half(p, wi, m, ok)
-    # weight = f cos_o / pdf = R F G2 / G1(wi), with 1/G1(wi) = mu(wi) / cos_i (no D: exact
-    # even where D is huge for small roughness)
-    G = md.G2(kind, wi, wo, m, ax, ay, correlated=p.shadowing == "correlated",
-                reflection_only=True)
-    mu = md.projected_area(kind, wi, ax, ay)
-    ok = ok & (pdf > 0)
-    w = jnp.where(ok, G * mu / jnp.where(ok, wi.z, 1.0), 0.0)
-    F = _fresnel(p, jnp.clip(dot(wi, m), 0.0, 1.0))
-    weight = with_bands(w) * F
-    return wo, weight, pdf
+    return ct.sample_reflection(p, wi, u, functools.partial(_fresnel, p))
 
 
 eval = boundary(_eval, Params)

@@ -80,6 +80,7 @@ from ..core.model import Model, boundary, with_bands
 from ..core.params import param, params_class, static
 from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
+from ..microfacet import cook_torrance as ct
 from ..microfacet import distribution as md
 from ..optics.fresnel import fresnel_dielectric
 
@@ -104,12 +105,6 @@ class Params:
             )
 
 
-def _alphas(p: Params):
-    ax = jnp.asarray(p.alpha)
-    ay = ax if p.alpha_v is None else jnp.asarray(p.alpha_v)
-    return ax, ay
-
-
 def _geometry(p: Params, wi: Vec3, wo: Vec3):
     """Half vector (upper hemisphere), transmission flag, eta_i, eta_o, and validity."""
     eta = jnp.asarray(p.eta)
@@ -125,7 +120,7 @@ def _geometry(p: Params, wi: Vec3, wo: Vec3):
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3):
-    ax, ay = _alphas(p)
+    ax, ay = ct.alphas(p)
     kind = p.distribution
     h, transmit, eta_i, eta_o, valid = _geometry(p, wi, wo)
     ci, co = dot(wi, h), dot(wo, h)
@@ -144,7 +139,7 @@ def _eval(p: Params, wi: Vec3, wo: Vec3):
 
 
 def _pdf_geom(p: Params, wi: Vec3, wo: Vec3, h, transmit, eta_i, eta_o, ok):
-    ax, ay = _alphas(p)
+    ax, ay = ct.alphas(p)
     kind = p.distribution
     ci, co = dot(wi, h), dot(wo, h)
     F = fresnel_dielectric(ci, p.eta)[0]
@@ -165,7 +160,7 @@ def _pdf(p: Params, wi: Vec3, wo: Vec3):
 
 
 def _sample(p: Params, wi: Vec3, u):
-    ax, ay = _alphas(p)
+    ax, ay = ct.alphas(p)
     kind = p.distribution
     eta = jnp.asarray(p.eta)
     shape = jnp.broadcast_shapes(jnp.shape(wi.z), jnp.shape(ax), jnp.shape(ay), jnp.shape(eta))

@@ -94,6 +94,9 @@ def _to_array(v):
     """Convert python / numpy numbers to jax arrays; leave arrays, tracers, others alone."""
     if isinstance(v, (bool, int, float, tuple, list, np.ndarray, np.generic)):
         return jnp.asarray(v, dtype=jnp.result_type(float))
+    if isinstance(v, jax.Array) and not isinstance(v, jax.core.Tracer) and v.weak_type:
+        # jnp.full(n, 1.5) is weakly typed: a strong copy keeps jit caches from splitting on it
+        return jnp.asarray(v, dtype=v.dtype)
     return v
 
 

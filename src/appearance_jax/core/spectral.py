@@ -92,12 +92,40 @@ def to_bands(values, color: str, wavelengths=RGB_WAVELENGTHS, illuminant: str = 
     """Output bands of a spectrum sampled at :func:`band_wavelengths` (trailing axis).
 
     "rgb3" and "spectral" return the samples as they are; "cie" returns linear sRGB of the
-    reflectance-type spectrum under ``illuminant`` (:func:`spectrum_to_linear_srgb`).
+    reflectance-type spectrum under ``illuminant``, white-balanced so that a spectrum of 1
+    maps to exactly (1, 1, 1) (:func:`cie_rgb_matrix`).
     """
     if color == "cie":
-        return spectrum_to_linear_srgb(values, band_wavelengths(color), illuminant)
+        v = jnp.asarray(values)
+        return v @ jnp.asarray(cie_rgb_matrix(illuminant), dtype=v.dtype)
     band_wavelengths(color, wavelengths)  # validates the mode
     return values
+
+
+@functools.lru_cache(maxsize=None)
+def cie_rgb_matrix(illuminant: str = "D65") -> np.ndarray:
+    """(n, 3) matrix: a reflectance spectrum on the CIE_GRID_NM grid -> white-balanced linear sRGB.
+
+    Row j is :func:`spectrum_to_linear_srgb` of a unit reflectance at wavelength j alone;
+    each column is then divided by its sum, so that a perfect reflector (1 everywhere) maps
+    to exactly (1, 1, 1). Without that, the 5-nm D65 integration gives (1.00004, 1.00001,
+    0.99973): the CIE D65 table's chromaticity (0.31272, 0.32903) is not exactly the rounded
+    sRGB white point (0.3127, 0.3290). Computed in numpy (float64) once per illuminant, so
+    it is a constant inside any trace.
+    """
+    wl_tab, cm = _cmfs_table()
+    wl = np.arange(CIE_GRID_NM[0], CIE_GRID_NM[1] + 1e-9, CIE_GRID_NM[2])
+    cmf = np.stack([np.interp(wl, wl_tab, cm[:, i], left=0.0, right=0.0) for i in range(3)], axis=-1)
+    if illuminant == "E":
+        ill = np.ones_like(wl)
+    else:
+        wl_i, v_i = _illuminant_table(illuminant)
+        ill = np.interp(wl, wl_i, v_i)
+    w = np.full_like(wl, CIE_GRID_NM[2])
+    w[0] = w[-1] = CIE_GRID_NM[2]  # uniform grid: the rectangle rule (integration_weights)
+    xyz = cmf * (ill * w)[:, None]  # (n, 3): XYZ of a unit reflectance at each wavelength
+    rgb = xyz @ XYZ_TO_RGB.T
+    return rgb / rgb.sum(axis=0, keepdims=True)
 
 
 # --------------------------------------------------------------------------------------

@@ -260,12 +260,13 @@ def multilayer(cos0, wavelength_nm, indices, thicknesses_nm) -> FilmResponse:
 # --------------------------------------------------------------------------------------
 
 def film_rgb(cos0, thickness_nm, eta0, eta1, eta2, *, mode: str = "cie", quantity: str = "reflectance",
-             polarization: str = "unpolarized", illuminant: str = "D65", step_nm: float = 5.0):
+             polarization: str = "unpolarized", illuminant: str = "D65"):
     """Linear sRGB of a film's reflectance (or transmittance), ``[..., 3]``.
 
-    ``mode="cie"``: the spectrum on a 380-780 nm grid (``step_nm``, 5 nm as Huang 2022
-    [T:742] of seed 001) integrated with the CIE 1931 colour-matching functions under
-    ``illuminant`` and converted to linear sRGB (a perfect reflector maps to (1, 1, 1)).
+    ``mode="cie"``: the spectrum on the 380-780 nm grid (5 nm as Huang 2022 [T:742] of
+    seed 001) integrated with the CIE 1931 colour-matching functions under ``illuminant``
+    and converted to white-balanced linear sRGB (a perfect reflector maps to (1, 1, 1);
+    :func:`appearance_jax.core.spectral.cie_rgb_matrix`).
     ``mode="rgb3"``: the thesis' cheap mode, one wavelength per channel
     (650, 510, 475 nm, Padron 2025 [T:526]), prone to spectral aliasing [T:526].
     """
@@ -273,13 +274,11 @@ def film_rgb(cos0, thickness_nm, eta0, eta1, eta2, *, mode: str = "cie", quantit
         raise ValueError(f"mode = {mode!r}: must be 'cie' or 'rgb3'")
     if quantity not in ("reflectance", "transmittance"):
         raise ValueError(f"quantity = {quantity!r}: must be 'reflectance' or 'transmittance'")
-    wl = spectral.wavelength_grid(380.0, 780.0, step_nm) if mode == "cie" else spectral.band_wavelengths("rgb3")
+    wl = spectral.band_wavelengths(mode)
     resp = airy(jnp.asarray(cos0)[..., None], wl, jnp.asarray(thickness_nm)[..., None],
                 jnp.asarray(eta0)[..., None], jnp.asarray(eta1)[..., None], jnp.asarray(eta2)[..., None])
     v = resp.reflectance(polarization) if quantity == "reflectance" else resp.transmittance(polarization)
-    if mode == "rgb3":
-        return v
-    return spectral.spectrum_to_linear_srgb(v, wl, illuminant)
+    return spectral.to_bands(v, mode, illuminant=illuminant)
 
 
 def color_chart(thickness_nm, theta_deg, eta0=1.0, eta1=1.33, eta2=1.0, *, mode: str = "cie", **kw):

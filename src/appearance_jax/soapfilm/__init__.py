@@ -1,0 +1,37 @@
+"""Soap films on spherical bubbles: film-thickness fields and thin-film bubble shading (Huang 2022, Ch. 3).
+
+* :mod:`.bubble`: the real-time bubble shading of Sec. 3.5 -- per-path Airy weights
+  (Eq. 3.29, per polarisation then averaged), the direction recursion through the sphere
+  (Eq. 3.30), spectral-to-RGB shading of a point (Eq. 3.32) and an orthographic
+  :func:`render`.
+* :mod:`.thickness`: thickness fields -- the gravity equilibrium (Eq. 3.36), Table 3.2's
+  dimensionless numbers, equirectangular maps, and field callables for the shader.
+
+Units: film thicknesses passed to the shader are the **full** thickness d = 2 eta in nm
+(the thesis' eta is the half thickness); wavelengths in nm; world +z is up.
+"""
+
+from .bubble import (  # noqa: F401
+    PathDirections,
+    PathWeights,
+    camera_basis,
+    image_plane,
+    path_colors,
+    path_directions,
+    path_weights,
+    render,
+    shade,
+)
+from .thickness import (  # noqa: F401
+    TABLE_3_1,
+    Constants,
+    DimensionlessNumbers,
+    dimensionless_numbers,
+    equilibrium_field,
+    equilibrium_thickness,
+    gamma0_for_marangoni,
+    latlong_field,
+    latlong_grid,
+    latlong_thickness,
+    uniform_field,
+)
