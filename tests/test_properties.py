@@ -68,6 +68,20 @@ GRID: dict[str, list[Case]] = {
         Case("ggx_rgb", dict(alpha=0.3, diffuse_reflectance=(0.2, 0.5, 0.8), specular_reflectance=0.5,
                              reflectance=0.1)),
     ],
+    # thin films: k_substrate > 0 keeps the central differences off the closed bound k = 0, where
+    # the substrate's forward branch flips (autodiff is one-sided there and right)
+    "iridescent": [
+        Case("ggx_film_on_absorber", dict(alpha=0.3, eta_substrate=1.5, k_substrate=0.1)),
+        Case("beckmann_aniso_conductor_cie", dict(alpha=0.2, alpha_v=0.5, distribution="beckmann", thickness=350.0,
+                                                  eta_film=1.4, eta_substrate=0.3, k_substrate=3.0, color="cie")),
+    ],
+    # snake skin: the non-delta part (the mirror lobe is snake.specular). Avoided: underside="airy"
+    # with eta2 != eta0 (not reciprocal by construction) and sigma_a = 0 (central differences step
+    # below the closed bound)
+    "snake": [
+        Case("default", dict()),
+        Case("rgb_strong", dict(kd=(0.9, 0.5, 0.2), sigma_a=(0.05, 0.3, 0.7), eta1=2.0, eta2=1.3)),
+    ],
     "henyey_greenstein": [
         Case("isotropic", dict(g=0.0), lossless=True),
         Case("forward", dict(g=0.8), lossless=True),
@@ -113,6 +127,15 @@ SLOW_GRID: dict[str, list[Case]] = {
         Case(f"{d}_a{a}", dict(alpha=a, diffuse_reflectance=0.5, reflectance=(0.3, 0.1, 0.2), distribution=d),
              opts=_FINE if a < 0.2 else {})
         for d in ("ggx", "beckmann") for a in (0.08, 0.5)
+    ],
+    "iridescent": [
+        Case("snake_like_a0.1", dict(alpha=0.1, thickness=900.0, eta_film=1.56, k_substrate=0.01), opts=_FINE),
+        Case("keratin_on_melanin", dict(preset="keratin_on_melanin")),
+    ],
+    "snake": [
+        Case("beer_sum_airy_matched", dict(absorption="beer_sum", underside="airy", kd=0.8, sigma_a=0.2, eta1=1.8)),
+        Case("thick_film_beer_sum", dict(thickness=2500.0, absorption="beer_sum", kd=(0.7, 0.4, 0.2), sigma_a=0.3,
+                                         eta0=1.1, eta2=1.25)),
     ],
     "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
                           for g in (-0.95, -0.5, 0.3, 0.95)],

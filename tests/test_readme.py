@@ -8,6 +8,13 @@ import numpy as np
 README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
 
 
+def _block(marker: str) -> str:
+    """The README python block containing ``marker`` (exactly one)."""
+    blocks = [b for b in re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S) if marker in b]
+    assert len(blocks) == 1, f"{len(blocks)} README python blocks contain {marker!r}"
+    return blocks[0]
+
+
 def test_quick_start_runs():
     text = README.read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
@@ -27,11 +34,10 @@ def test_readme_and_ci_run_the_same_test_command():
 
 
 def test_fitting_example_runs(tmp_path, monkeypatch):
-    """The README's fitting example (second python block) runs from the repository root."""
+    """The README's fitting example runs from the repository root."""
     import jax
 
-    text = README.read_text()
-    block = re.findall(r"```python\n(.*?)```", text, flags=re.S)[1]
+    block = _block("read_table(")
     block = block.replace('"out/fit_api"', repr(str(tmp_path / "fit_api")))
     monkeypatch.chdir(README.parent)
     ns: dict = {}
@@ -42,3 +48,20 @@ def test_fitting_example_runs(tmp_path, monkeypatch):
     res = ns["result"]
     assert res.converged and res.metrics["cos_log_rmse"] < 0.02
     assert (tmp_path / "fit_api" / "params.json").exists() and (tmp_path / "fit_api" / "maps.png").exists()
+
+
+def test_thin_film_example_runs():
+    ns: dict = {}
+    exec(compile(_block("thinfilm.airy("), "README thin-film example", "exec"), ns)
+    np.testing.assert_allclose(np.asarray(ns["r"].R), [0.1308, 0.1743, 0.0156], atol=1e-4)
+    chart = np.asarray(ns["chart"])
+    assert chart.shape == (101, 18, 3) and np.all((chart >= 0) & (chart <= 1))
+
+
+def test_soap_bubble_example_runs():
+    ns: dict = {}
+    exec(compile(_block("soapfilm.render("), "README soap-bubble example", "exec"), ns)
+    image, mask = np.asarray(ns["image"]), np.asarray(ns["mask"])
+    assert image.shape == (64, 64, 3) and mask.shape == (64, 64) and np.all(np.isfinite(image))
+    assert 0.7 < mask.mean() < 0.8  # the disc: pi / 4 of the square
+    assert np.ptp(image[mask], axis=0).max() > 0.05  # not a flat colour: interference bands

@@ -19,6 +19,8 @@ _MODULES = (
     "appearance_jax.bsdf.rough_conductor",
     "appearance_jax.bsdf.rough_dielectric",
     "appearance_jax.bsdf.rough_plastic",
+    "appearance_jax.bsdf.iridescent",
+    "appearance_jax.bsdf.snake",
     "appearance_jax.phase.henyey_greenstein",
     "appearance_jax.phase.hg_mixture",
 )

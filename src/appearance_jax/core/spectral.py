@@ -77,15 +77,24 @@ def wavelengths_tuple(v) -> tuple:
     return tuple(float(x) for x in a)
 
 
-def band_wavelengths(color: str, wavelengths=RGB_WAVELENGTHS) -> jnp.ndarray:
-    """The wavelengths (nm) at which a model evaluates its spectrum for a colour mode."""
+def band_wavelengths_np(color: str, wavelengths=RGB_WAVELENGTHS) -> np.ndarray:
+    """The wavelengths (nm, float64 numpy) at which a model computes its spectrum for a colour mode.
+
+    numpy, so that their number is known when parameters are validated (outside any trace).
+    """
     if color == "rgb3":
-        return jnp.asarray(RGB_WAVELENGTHS, dtype=jnp.result_type(float))
+        return np.asarray(RGB_WAVELENGTHS, dtype=float)
     if color == "cie":
-        return wavelength_grid(*CIE_GRID_NM)
+        start, stop, step = CIE_GRID_NM
+        return start + step * np.arange(int(round((stop - start) / step)) + 1)
     if color == "spectral":
-        return jnp.asarray(wavelengths, dtype=jnp.result_type(float))
+        return np.asarray(wavelengths, dtype=float)
     raise ValueError(f"color = {color!r}: must be one of {', '.join(COLOR_MODES)}")
+
+
+def band_wavelengths(color: str, wavelengths=RGB_WAVELENGTHS) -> jnp.ndarray:
+    """:func:`band_wavelengths_np` as a jax array of the default float dtype."""
+    return jnp.asarray(band_wavelengths_np(color, wavelengths), dtype=jnp.result_type(float))
 
 
 def to_bands(values, color: str, wavelengths=RGB_WAVELENGTHS, illuminant: str = "D65") -> jnp.ndarray:
