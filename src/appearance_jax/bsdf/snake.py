@@ -41,7 +41,7 @@ numerically, so reciprocity holds to rounding). The directional albedo of f_d us
 rule: A_d(mu_i) = T(mu_i) sum_j 2 pi w_j mu_j T_u(mu_j) F(mu_i, mu_j) = T(mu_i) u(mu_i) . Q,
 Q = c + M f_1 c, c_j = 2 pi w_j mu_j T_u(mu_j). One (n, n) solve per band and parameter
 set, then O(n^2) per direction pair; exact to the quadrature, jittable, vmappable and
-differentiable (``jnp.linalg.solve``). With k_d = 1, sigma_a = 0 the rule reproduces the
+differentiable (:func:`~appearance_jax.core.linalg.solve_diagonally_dominant`). With k_d = 1, sigma_a = 0 the rule reproduces the
 white furnace R(mu) + A_d(mu) = 1 to rounding (it integrates mu exactly).
 
 *The rule.* Gauss-Legendre on two panels, [0, s] (n // 4 nodes) and [s, 1] (the rest,
@@ -145,6 +145,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import spectral, warp
+from ..core.linalg import solve_diagonally_dominant
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import param, params_class, static
 from ..core.quadrature import gauss_legendre
@@ -361,7 +362,9 @@ def _solve(p: Params, directions=()):
     D = jnp.broadcast_to(D, shape[:-1])
     eye = jnp.eye(n, dtype=f1.dtype)
     A = eye - f1 * D[..., None, :]
-    M = D[..., :, None] * jnp.linalg.solve(A, jnp.broadcast_to(eye, shape))
+    # I - K is diagonally dominant (row sums of K <= albedo x max R < 1); the plain-XLA solve
+    # avoids a LAPACK custom call that deadlocked vmapped multi-start fits (core.linalg)
+    M = D[..., :, None] * solve_diagonally_dominant(A, jnp.broadcast_to(eye, shape))
     M = 0.5 * (M + jnp.swapaxes(M, -1, -2))
     # albedo: A_d(mu_i) = T(mu_i) sum_j c_j F(mu_i, mu_j), c_j = 2 pi w_j mu_j T_u(mu_j),
     # F(mu_i, mu_j) = u_j(mu_i) + (u(mu_i)^T M f1)_j  =>  Q = c + M f1 c
