@@ -10,6 +10,11 @@ float64, best of ``--repeats`` after a warm-up (compilation excluded). tmm: ``co
 for s and p per sample (it is a scalar function), timed on ``--tmm-n`` samples and
 reported per sample. Also a 4-layer stack (``multilayer`` vs ``coh_tmm``). Prints the
 ratio ours / tmm; the issue's target is >= 100x on batches of 1e5 samples.
+
+For context (no peer implements these BSDFs: Mitsuba 3 has no thin-film plugin) it also
+times the thin-film BSDFs on ``--pairs`` random direction pairs, float32: ``iridescent``
+(rgb3 and cie colour modes), ``snake`` (Nyström, 48 nodes) and ``rough_conductor`` (the
+same microfacet code with a conductor Fresnel term), in pairs per second.
 Not a test: nothing here asserts a time.
 """
 
@@ -37,6 +42,7 @@ def main():
     ap.add_argument("--n", type=int, default=100_000)
     ap.add_argument("--tmm-n", type=int, default=2000)
     ap.add_argument("--repeats", type=int, default=10)
+    ap.add_argument("--pairs", type=int, default=1_000_000)
     args = ap.parse_args()
 
     import tmm
@@ -79,6 +85,36 @@ def main():
     for name, a, b in rows:
         print(f"{'appearance-jax ' + name:34s} {a:18.3e} {b:20.3e} {a / tmm_film:11.0f} {b / tmm_stack:14.0f}")
     print(f"{'tmm coh_tmm (s+p per sample)':34s} {tmm_film:18.3e} {tmm_stack:20.3e} {1:11d} {1:14d}")
+
+    bsdf_throughput(args.pairs, args.repeats)
+
+
+def bsdf_throughput(n, repeats):
+    """Thin-film BSDF evaluations per second (float32), rough_conductor for context."""
+    from appearance_jax.bsdf import iridescent, rough_conductor, snake
+    from appearance_jax.core.vec import Vec3
+
+    rng = np.random.default_rng(1)
+
+    def hemi():
+        v = rng.normal(size=(3, n))
+        v /= np.linalg.norm(v, axis=0)
+        v[2] = np.abs(v[2])
+        return Vec3(*v.astype(np.float32))
+
+    wi, wo = hemi(), hemi()
+    cases = [
+        ("rough_conductor (context)", rough_conductor, rough_conductor.Params(alpha=0.3)),
+        ("iridescent rgb3", iridescent, iridescent.Params(alpha=0.3)),
+        ("iridescent cie (81 wavelengths)", iridescent, iridescent.Params(alpha=0.3, color="cie")),
+        ("snake rgb3 (Nystrom, 48 nodes)", snake, snake.Params()),
+    ]
+    print(f"\n{n} random direction pairs, float32")
+    print(f"{'BSDF eval':34s} {'pairs/s':>12s}")
+    for name, mod, p in cases:
+        fn = jax.jit(mod.eval.kernel)
+        t = best(lambda: fn(p, wi, wo), repeats)
+        print(f"{name:34s} {n / t:12.3e}")
 
 
 if __name__ == "__main__":
