@@ -175,8 +175,12 @@ def test_nystrom_matches_random_walk(name):
         f = _all(p, MU_I, MU_O, 1.3)[0]
         est, se = (np.asarray(x) for x in snake.eval_mc(p, wi, wo, jax.random.key(11), n_paths=20_000,
                                                         max_bounces=32, roulette=roulette))
-        assert np.all(se > 0) and np.all(se < 0.01 * f), (se, f)
-        z = np.abs(est - f) / se
+        # exits beyond the critical angle of the Airy underside (eta_2 > eta_0): T(mu_o) = 0, so
+        # both estimators are 0 there (up to rounding); elsewhere compare in standard errors
+        dark = f < 1e-12 * f.max()
+        assert np.all(np.abs(est[dark]) < 1e-12 * f.max()), (est, f)
+        assert np.all(se[~dark] > 0) and np.all(se[~dark] < 0.01 * f[~dark]), (se, f)
+        z = np.abs(est[~dark] - f[~dark]) / se[~dark]
         assert np.all(z < 3.0), f"{name} {kw}: z = {z}"
         if kw is cases[0]:  # same key => same numbers
             est2, _ = snake.eval_mc(p, wi, wo, jax.random.key(11), n_paths=20_000, max_bounces=32,

@@ -123,6 +123,83 @@ def _power(r_s, r_p, t_s, t_p, q0, qN, eta0, etaN):
     return FilmResponse(r_s, r_p, t_s, t_p, jnp.abs(r_s) ** 2, jnp.abs(r_p) ** 2, T_s, T_p)
 
 
+# Complex numbers as (real, imaginary) pairs of real arrays. XLA:CPU's complex arithmetic
+# (scaled division, complex sqrt/exp) made the film ~15x slower than this real formulation,
+# and the film is the hot loop of every thin-film BSDF. Same formulas, same branches; the
+# complex-typed reference is :func:`multilayer` (tested equal) and tmm.
+
+
+def _cmul(a, b):
+    return a[0] * b[0] - a[1] * b[1], a[0] * b[1] + a[1] * b[0]
+
+
+def _cadd(a, b):
+    return a[0] + b[0], a[1] + b[1]
+
+
+def _csub(a, b):
+    return a[0] - b[0], a[1] - b[1]
+
+
+def _cdiv(a, b):
+    d = b[0] * b[0] + b[1] * b[1]
+    return (a[0] * b[0] + a[1] * b[1]) / d, (a[1] * b[0] - a[0] * b[1]) / d
+
+
+def _cabs2(a):
+    return a[0] * a[0] + a[1] * a[1]
+
+
+def _csqrt_forward(x, y):
+    """sqrt(x + i y) on the forward branch (Im >= 0; for y >= 0 the principal root).
+
+    The stable textbook form: for x >= 0, re = sqrt((|z| + x)/2), im = y / (2 re); for
+    x < 0, im = sqrt((|z| - x)/2), re = y / (2 im). Both branches are smooth where they are
+    used (double-where), so gradients stay finite on the real axis, where |z| - x = 0.
+    z = 0 exactly is nudged to machine epsilon, as :func:`~appearance_jax.optics.fresnel.normal_index`.
+    """
+    eps = jnp.finfo(jnp.result_type(x, float)).eps
+    zero = (x == 0) & (y == 0)
+    x = jnp.where(zero, eps, x)
+    r = jnp.sqrt(x * x + y * y)
+    pos = x >= 0
+    a = jnp.sqrt(jnp.where(pos, 0.5 * (r + x), 1.0))
+    b = jnp.sqrt(jnp.where(pos, 1.0, 0.5 * (r - x)))
+    re = jnp.where(pos, a, y / (2.0 * b))
+    im = jnp.where(pos, y / (2.0 * a), b)
+    flip = im < 0  # only for y < 0 (gain media), outside the physical domain k >= 0
+    return jnp.where(flip, -re, re), jnp.where(flip, -im, im)
+
+
+def _split(z):
+    z = jnp.asarray(z)
+    if jnp.iscomplexobj(z):
+        return jnp.real(z), jnp.imag(z)
+    z = z.astype(jnp.result_type(z, float))
+    return z, jnp.zeros_like(z)
+
+
+def _interface_pairs(qi, qt, ei, et):
+    """Signed amplitudes (r_s, r_p, t_s, t_p) as pairs; see fresnel.interface_amplitudes."""
+    ei2, et2 = _cmul(ei, ei), _cmul(et, et)
+    ds = _cadd(qi, qt)
+    num_p = _csub(_cmul(et2, qi), _cmul(ei2, qt))
+    dp = _cadd(_cmul(et2, qi), _cmul(ei2, qt))
+    ok_s, ok_p = _cabs2(ds) > 0, _cabs2(dp) > 0
+    ds = (jnp.where(ok_s, ds[0], 1.0), jnp.where(ok_s, ds[1], 0.0))
+    dp = (jnp.where(ok_p, dp[0], 1.0), jnp.where(ok_p, dp[1], 0.0))
+
+    def pick(ok, v, default):
+        return jnp.where(ok, v[0], default), jnp.where(ok, v[1], 0.0)
+
+    r_s = pick(ok_s, _cdiv(_csub(qi, qt), ds), 0.0)
+    r_p = pick(ok_p, _cdiv(num_p, dp), 0.0)
+    two_qi = (2.0 * qi[0], 2.0 * qi[1])
+    t_s = pick(ok_s, _cdiv(two_qi, ds), 1.0)
+    t_p = pick(ok_p, _cdiv(_cmul(_cmul(ei, et), two_qi), dp), 1.0)
+    return r_s, r_p, t_s, t_p
+
+
 def airy(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2) -> FilmResponse:
     """One film on a substrate: Airy amplitudes and power coefficients (spec M10, Padron 2025).
 
@@ -131,28 +208,46 @@ def airy(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2) -> FilmResponse:
         wavelength_nm: vacuum wavelength (nm), > 0.
         thickness_nm: film thickness d (nm), >= 0 (d = 0 gives the bare eta0 | eta2 interface).
         eta0: index of the incidence medium (real).
-        eta1: film index (real, or complex n + i k for an absorbing film).
-        eta2: substrate index (real, or complex for a conductor).
+        eta1: film index (real, or complex n + i k with k >= 0 for an absorbing film).
+        eta2: substrate index (real, or complex for a conductor, k >= 0).
 
     Returns:
         :class:`FilmResponse` (r_s, r_p, t_s, t_p complex; R_s, R_p, T_s, T_p real; .R, .T
-        unpolarised), broadcast over all arguments.
+        unpolarised), broadcast over all arguments. Computed in real arithmetic (complex
+        numbers as pairs); the complex outputs are assembled at the end, so code that only
+        uses the powers never pays for them.
     """
-    q0, inv = _incidence(cos0, eta0)
-    q1 = normal_index(eta1, inv)
-    q2 = normal_index(eta2, inv)
-    r01s, r01p, t01s, t01p = interface_amplitudes(q0, q1, eta0, eta1)
-    r12s, r12p, t12s, t12p = interface_amplitudes(q1, q2, eta1, eta2)
-    k0 = 2.0 * jnp.pi / jnp.asarray(wavelength_nm)
-    half = jnp.exp(1j * k0 * jnp.asarray(thickness_nm) * q1)  # e^{i phi/2}
-    full = half * half
-    ds = 1.0 + r01s * r12s * full
-    dp = 1.0 + r01p * r12p * full
-    r_s = (r01s + r12s * full) / ds
-    r_p = (r01p + r12p * full) / dp
-    t_s = t01s * t12s * half / ds
-    t_p = t01p * t12p * half / dp
-    return _power(r_s, r_p, t_s, t_p, q0, q2, eta0, eta2)
+    c = jnp.clip(jnp.asarray(cos0, dtype=jnp.result_type(cos0, float)), 0.0, 1.0)
+    e0 = (jnp.asarray(eta0, dtype=c.dtype), jnp.zeros((), c.dtype))
+    e1, e2 = _split(eta1), _split(eta2)
+    s2 = (1.0 - c * c) * e0[0] * e0[0]  # (eta0 sin theta0)^2, the Snell invariant squared
+    q0 = (e0[0] * c, jnp.zeros_like(c))
+
+    def q(e):  # q = sqrt(eta^2 - s2) on the forward branch
+        return _csqrt_forward(e[0] * e[0] - e[1] * e[1] - s2, 2.0 * e[0] * e[1])
+
+    q1, q2 = q(e1), q(e2)
+    r01s, r01p, t01s, t01p = _interface_pairs(q0, q1, e0, e1)
+    r12s, r12p, t12s, t12p = _interface_pairs(q1, q2, e1, e2)
+    k = 2.0 * jnp.pi / jnp.asarray(wavelength_nm) * jnp.asarray(thickness_nm)  # k0 d
+    decay = jnp.exp(-k * q1[1])
+    half = (decay * jnp.cos(k * q1[0]), decay * jnp.sin(k * q1[0]))  # e^{i phi/2}
+    full = _cmul(half, half)
+
+    def film(r01, r12, t01, t12):
+        r12f = _cmul(r12, full)
+        den = _cadd((1.0, 0.0), _cmul(r01, r12f))
+        return _cdiv(_cadd(r01, r12f), den), _cdiv(_cmul(_cmul(t01, t12), half), den)
+
+    (r_s, t_s), (r_p, t_p) = film(r01s, r12s, t01s, t12s), film(r01p, r12p, t01p, t12p)
+    # power flow: T_s = Re(q2)/q0 |t_s|^2, T_p = Re(eta2 conj(cos2))/q0 |t_p|^2 (eta0, q0 real)
+    ok = q0[0] > 0
+    inv = jnp.where(ok, 1.0 / jnp.where(ok, q0[0], 1.0), 0.0)
+    cos2 = _cdiv(q2, e2)
+    flow_p = e2[0] * cos2[0] + e2[1] * cos2[1]  # Re(eta2 conj(cos2))
+    cplx = jax.lax.complex
+    return FilmResponse(cplx(*r_s), cplx(*r_p), cplx(*t_s), cplx(*t_p), _cabs2(r_s), _cabs2(r_p),
+                        q2[0] * inv * _cabs2(t_s), flow_p * inv * _cabs2(t_p))
 
 
 def airy_reflectance(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2, polarization: str = "unpolarized"):
