@@ -82,6 +82,13 @@ GRID: dict[str, list[Case]] = {
         Case("default", dict()),
         Case("rgb_strong", dict(kd=(0.9, 0.5, 0.2), sigma_a=(0.05, 0.3, 0.7), eta1=2.0, eta2=1.3)),
     ],
+    # SGGX specular microflakes (Eq. 4.10, Padrón 2025); dewy2 (alpha 0.002) is too narrow for the
+    # harness quadrature and is checked in tests/phase/test_sggx_flakes.py
+    "sggx_flakes": [
+        Case("default", dict(), lossless=True),
+        Case("tilted_rough", dict(alpha=0.5, theta=0.6), lossless=True),
+        Case("matte2", dict(preset="matte2"), lossless=True),
+    ],
     "henyey_greenstein": [
         Case("isotropic", dict(g=0.0), lossless=True),
         Case("forward", dict(g=0.8), lossless=True),
@@ -137,6 +144,9 @@ SLOW_GRID: dict[str, list[Case]] = {
         Case("thick_film_beer_sum", dict(thickness=2500.0, absorption="beer_sum", kd=(0.7, 0.4, 0.2), sigma_a=0.3,
                                          eta0=1.1, eta2=1.25)),
     ],
+    "sggx_flakes": [Case(f"a{a}_t{t}", dict(alpha=a, theta=t), lossless=True)
+                    for a in (1.0, 0.5, 0.3) for t in (0.0, 0.6, 1.4)]
+    + [Case(name, dict(preset=name), lossless=True, opts=_FINE) for name in ("dewy1", "matte1")],
     "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]

@@ -23,6 +23,7 @@ _MODULES = (
     "appearance_jax.bsdf.snake",
     "appearance_jax.phase.henyey_greenstein",
     "appearance_jax.phase.hg_mixture",
+    "appearance_jax.phase.sggx_flakes",
 )
 
 # listed sums of lobes: Cook-Torrance specular + diffuse (the classical baseline for fitting
