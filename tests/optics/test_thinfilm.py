@@ -106,7 +106,8 @@ def test_free_standing_film_extremes_and_phase_average(n, Rmax, Rmean):
     R = np.asarray(tf.airy(1.0, lam, d, 1.0, n, 1.0).R)
     assert R[0] < 1e-30 and abs(R[128] - Rmax) < 5e-6
     np.testing.assert_allclose(R.max(), Rmax, atol=5e-6)
-    np.testing.assert_allclose(R.mean(), Rmean, atol=5e-6)  # exact for a trigonometric polynomial... of a ratio: 256 nodes converge
+    # the mean over 256 equispaced phases converges geometrically to the period average
+    np.testing.assert_allclose(R.mean(), Rmean, atol=5e-6)
 
 
 def test_keratin_spectral_extrema_tf6():
@@ -164,7 +165,7 @@ def test_multilayer_three_media_equals_airy_and_two_media_the_interface():
 def test_multilayer_thick_absorbing_layer_does_not_overflow():
     """A 1 mm metal layer: the normalised propagation keeps numbers finite, T -> 0."""
     r = tf.multilayer(0.8, 500.0, np.array([1.0, 1.5, 0.2 + 3.0j, 1.5]), np.array([100.0, 1e6]))
-    assert np.isfinite(float(r.R)) and float(r.T) < 1e-300 + 1e-12
+    assert np.isfinite(float(r.R)) and float(r.T) < 1e-12
     # and the reflectance is the one of the semi-infinite metal under the same coating
     semi = tf.airy(0.8, 500.0, 100.0, 1.0, 1.5, 0.2 + 3.0j)
     assert abs(float(r.R) - float(semi.R)) < 1e-12

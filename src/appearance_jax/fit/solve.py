@@ -445,13 +445,12 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
                             max_theta_deg=max_theta_deg, use_sigma=use_sigma, key=key, model_kwargs=model_kwargs)
     sp = problem.space
     dt = jnp.result_type(float)
-    z0 = jnp.asarray(sp.z_from_x(sp.x_start()), dt)[None]
-    if len(inits) > 1:
-        more = [_start_params(problem.model, p) for p in inits[1:]]
-        z0 = jnp.concatenate([z0] + [jnp.asarray(sp.z_from_x(sp.x_from_params(p)), dt)[None] for p in more])
-    n_starts = n_starts + len(inits) - 1
-    if n_starts > len(inits):
-        z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - len(inits)).astype(dt)])
+    # the given starts (the first is the problem's own), then n_starts - 1 random ones
+    xs = [sp.x_start()] + [sp.x_from_params(_start_params(problem.model, p)) for p in inits[1:]]
+    z0 = jnp.asarray(np.stack([sp.z_from_x(x) for x in xs]), dt)
+    if n_starts > 1:
+        z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - 1).astype(dt)])
+    n_starts = z0.shape[0]
 
     def run(z0s, data):
         return jax.vmap(lambda z: solve_z(problem, z, data, solver=solver, rtol=rtol, atol=atol,

@@ -4,6 +4,7 @@ A film of index eta_1 and thickness d lies between an incidence medium eta_0 (re
 non-absorbing) and a substrate eta_2 (a dielectric, or a conductor n + i k). Light arrives
 from the eta_0 side at angle theta_0. Per polarisation (s, p), with the signed complex
 interface amplitudes of :func:`~appearance_jax.optics.fresnel.interface_amplitudes`
+(written out again in real arithmetic inside :func:`airy`, its hot loop)
 (Yeh 2005; Belcour & Barla 2017; spec M10 of Padron 2025, which corrects the thesis):
 
     r = (r_01 + r_12 e^{i phi}) / (1 + r_01 r_12 e^{i phi})
@@ -309,10 +310,6 @@ def multilayer(cos0, wavelength_nm, indices, thicknesses_nm) -> FilmResponse:
     n = jnp.broadcast_to(n, shape + (L,))
     q = q.at[..., 0].set(jnp.broadcast_to(q0, shape))
 
-    def interface(j):
-        rs, rp, ts, tp = interface_amplitudes(q[..., j], q[..., j + 1], n[..., j], n[..., j + 1])
-        return rs, rp, ts, tp
-
     def matrix(r, t):
         # [[1, r], [r, 1]] / t as (a, b, c, d)
         inv_t = 1.0 / t
@@ -323,28 +320,31 @@ def multilayer(cos0, wavelength_nm, indices, thicknesses_nm) -> FilmResponse:
         e, f, g, h = B
         return (a * e + b * g, a * f + b * h, c * e + dd * g, c * f + dd * h)
 
-    rs0, rp0, ts0, tp0 = interface(0)
-    Ms = matrix(rs0, ts0)
-    Mp = matrix(rp0, tp0)
+    # every interface j | j+1 at once; the first starts the product, the others are scanned
+    rs, rp, ts, tp = interface_amplitudes(q[..., :-1], q[..., 1:], n[..., :-1], n[..., 1:])
+    Ms = matrix(rs[..., 0], ts[..., 0])
+    Mp = matrix(rp[..., 0], tp[..., 0])
     phase = jnp.ones(shape, dtype=q.dtype)
     if L > 2:
-        dd = jnp.broadcast_to(d, shape + (L - 2,))
         # per inner layer j = 1..L-2: its propagation and the interface below it
         q_in = jnp.moveaxis(q[..., 1:-1], -1, 0)
-        d_in = jnp.moveaxis(dd, -1, 0)
-        rs, rp, ts, tp = interface_amplitudes(q[..., 1:-1], q[..., 2:], n[..., 1:-1], n[..., 2:])
-        stack = tuple(jnp.moveaxis(x, -1, 0) for x in (rs, rp, ts, tp))
+        d_in = jnp.moveaxis(jnp.broadcast_to(d, shape + (L - 2,)), -1, 0)
+        below = tuple(jnp.moveaxis(x[..., 1:], -1, 0) for x in (rs, rp, ts, tp))
 
         def step(carry, xs):
             Ms, Mp, phase = carry
             qj, dj, rs, rp, ts, tp = xs
             e = jnp.exp(1j * k0 * dj * qj)  # e^{i delta_j}, |e| <= 1 on the forward branch
-            P = (1.0, 0.0, 0.0, e * e)
-            Ms = mul(mul(Ms, P), matrix(rs, ts))
-            Mp = mul(mul(Mp, P), matrix(rp, tp))
+            e2 = e * e
+
+            def propagate(M):  # M diag(1, e^{2 i delta_j}): scales the second column
+                return (M[0], M[1] * e2, M[2], M[3] * e2)
+
+            Ms = mul(propagate(Ms), matrix(rs, ts))
+            Mp = mul(propagate(Mp), matrix(rp, tp))
             return (Ms, Mp, phase * e), None
 
-        (Ms, Mp, phase), _ = jax.lax.scan(step, (Ms, Mp, phase), (q_in, d_in) + stack)
+        (Ms, Mp, phase), _ = jax.lax.scan(step, (Ms, Mp, phase), (q_in, d_in) + below)
     r_s, r_p = Ms[2] / Ms[0], Mp[2] / Mp[0]
     t_s, t_p = phase / Ms[0], phase / Mp[0]
     return _power(r_s, r_p, t_s, t_p, q[..., 0], q[..., -1], n[..., 0], n[..., -1])
