@@ -65,3 +65,13 @@ def test_soap_bubble_example_runs():
     assert image.shape == (64, 64, 3) and mask.shape == (64, 64) and np.all(np.isfinite(image))
     assert 0.7 < mask.mean() < 0.8  # the disc: pi / 4 of the square
     assert np.ptp(image[mask], axis=0).max() > 0.05  # not a flat colour: interference bands
+
+
+def test_cosmetics_example_runs():
+    ns: dict = {}
+    exec(compile(_block("cosmetics.eval_stack("), "README cosmetics example", "exec"), ns)
+    f, se, f2 = (np.asarray(ns[k]) for k in ("f", "se", "f2"))
+    assert f.shape == (5, 3) and se.shape == (5, 3) and np.all(se > 0) and np.all(np.isfinite(f2))
+    assert np.argmax(f.mean(-1)) == 3  # the dewy highlight at the mirror direction (30 deg)
+    f_ad = np.asarray(ns["f_ad"])
+    assert f_ad.shape == (5,) and np.all(f_ad > 0)

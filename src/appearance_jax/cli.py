@@ -59,6 +59,8 @@ def format_model_table(model) -> str:
     flags.append("reciprocal" if model.reciprocal else "not reciprocal")
     if model.transmissive:
         flags.append("transmissive")
+    if model.stochastic:
+        flags.append("Monte Carlo: eval(..., key=) returns (estimate, stderr)")
     out = [f"{model.name}  ({model.kind}; {', '.join(flags)})", f"  {model.summary}", f"  source: {model.source}",
            line(head), line(["-" * w for w in widths])]
     out += [line(b) for b in body]
@@ -165,8 +167,10 @@ def evaluate_in_plane(model, params, theta_i_deg, theta_o_deg):
 
     ti, to = np.meshgrid(theta_i_deg, theta_o_deg, indexing="ij")
     wi, wo = in_plane_directions(jnp.deg2rad(ti.ravel()), jnp.deg2rad(to.ravel()))
-    f = np.asarray(model.eval(params, wi, wo))
-    return ti.ravel(), to.ravel(), f
+    f = model.eval(params, wi, wo)
+    if isinstance(f, tuple):  # stochastic evaluators: (estimate, standard error)
+        f = f[0]
+    return ti.ravel(), to.ravel(), np.asarray(f)
 
 
 def write_table(path, theta_i, theta_o, f, quantity="BRDF"):

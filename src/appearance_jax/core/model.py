@@ -70,6 +70,8 @@ class Model:
     # True when wo ranges over the whole sphere (transmission / phase functions)
     transmissive: bool = False
     presets: Mapping[str, Any] = field(default_factory=dict)
+    # True for Monte Carlo evaluators: eval(params, wi, wo, key=...) returns (estimate, stderr)
+    stochastic: bool = False
 
     def __post_init__(self):
         if self.kind not in ("bsdf", "phase", "bcsdf"):

@@ -1,0 +1,173 @@
+"""The cosmetic medium: spherical diffusers and SGGX platelets in one slab (Ch. 4, Padrón 2025;
+seed-000 spec M15).
+
+Extinction, albedo and phase function of the anisotropic RTE (Eq. 4.2), with the base
+extinction ``sigma_base = 1`` (thicknesses are in base mean free paths, [T:774, 804]):
+
+    sigma_t(w) = c_d + (1 - c_d) C(w)                                           (Eq. 4.5)
+    Lambda(w)  = (Lambda_d c_d + Lambda_p (1 - c_d) C(w)) / sigma_t(w)          (Eq. 4.7)
+    f(w -> wo) = (Lambda_d c_d f_d + Lambda_p (1 - c_d) C(w) f_p)
+                 / (Lambda_d c_d + Lambda_p (1 - c_d) C(w))                      (Eq. 4.8)
+
+``C(w)`` = Ĉ_p(w) is the platelets' normalised projected area, the SGGX sigma(w) of
+:func:`appearance_jax.phase.sggx_flakes.sigma` (max 1 along the mean flake normal); ``f_d`` is
+the two-lobe HG mixture (Eq. 4.9) and ``f_p`` the specular flake phase function (Eq. 4.10).
+Both directions point away from the scattering point; light travels along ``d = -wi`` and C
+is even, so the direction "seen" by the light is immaterial (decision D5).
+
+What a random walk needs is the product ``Lambda(wi) f(wi -> wo)`` (:func:`scattering`),
+which simplifies to ``(Lambda_d c_d f_d + Lambda_p (1 - c_d) D(wh) / 4) / sigma_t(wi)``
+because ``C(wi) f_p = D(wh) / 4`` (no division by a small projected area), and the
+collision kernel (:func:`collide`): the particle is a platelet with the colourless
+probability ``P_p = (1 - c_d) C(wi) / sigma_t(wi)``, otherwise a diffuser; the throughput
+is multiplied by that particle's albedo and the direction is drawn from its phase function
+(SGGX visible normals; HG inversion). Its expectation is ``Lambda(wi) f(wi -> wo)``: the
+two formulations of the thesis [T:736] agree (tests/layered/test_medium.py).
+
+Gradients: the particle type and the HG lobe are discrete choices. They are drawn with
+``stop_gradient`` probabilities ``q`` and weighted by ``P / q``: the value is unchanged and
+the derivative carries the score term ``dP / q`` (spec §6.4). ``q`` is kept inside
+[Q_MIN, 1 - Q_MIN] (defensive sampling) so that a branch of probability 0 -- a single lobe
+(w_g = 1), no platelets (c_d = 1) -- is still sampled now and then and its derivative is
+not lost; the estimator stays unbiased. Directions are reparameterised samples, smooth in
+g1, g2, alpha and theta.
+
+| parameter | default | range     | unit | meaning                                              |
+|-----------|---------|-----------|------|------------------------------------------------------|
+| c_d       | 0.9     | [0, 1]    | 1    | relative diffuser concentration sigma_d / sigma_base |
+| albedo_d  | 0.95    | [0, 1]    | 1    | diffuser single-scattering albedo Lambda_d, per band |
+| albedo_p  | 0.9     | [0, 1]    | 1    | platelet single-scattering albedo Lambda_p, per band |
+| w_g       | 1.0     | [0, 1]    | 1    | weight of HG lobe 1 of the diffusers                 |
+| g1        | 0.5     | (-1, 1)   | 1    | asymmetry of HG lobe 1                               |
+| g2        | -0.2    | (-1, 1)   | 1    | asymmetry of HG lobe 2                               |
+| alpha     | 0.2     | (0, 1]    | 1    | platelet SGGX roughness alpha_p                      |
+| theta     | 0.0     | [0, pi/2] | rad  | tilt theta_p of the mean platelet normal about x     |
+
+The functions below take any object with these attributes (the cosmetic BSDF's ``Params``
+adds a thickness and a base), with scalars or arrays that broadcast against the directions.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+
+from ..core.frame import reflect
+from ..core.model import with_bands
+from ..core.params import param, params_class
+from ..core.vec import Vec3, dot, normalize, where
+from ..microfacet import sggx
+from ..phase.henyey_greenstein import direction_about, sample_cos
+from ..phase.hg_mixture import mixture_value
+
+#: smallest probability with which a discrete branch is sampled (defensive sampling)
+Q_MIN = 0.05
+
+
+@params_class
+class Params:
+    c_d: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="relative diffuser concentration sigma_d / sigma_base")
+    albedo_d: object = param(0.95, lo=0.0, hi=1.0, unit="1", doc="diffuser single-scattering albedo Lambda_d",
+                             bands=True)
+    albedo_p: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="platelet single-scattering albedo Lambda_p",
+                             bands=True)
+    w_g: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="weight of the diffusers' HG lobe 1")
+    g1: object = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 1")
+    g2: object = param(-0.2, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 2")
+    alpha: object = param(0.2, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="platelet SGGX roughness alpha_p")
+    theta: object = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
+                          doc="tilt theta_p of the mean platelet normal about x (Table A.1: degrees)")
+
+
+FIELDS = ("c_d", "albedo_d", "albedo_p", "w_g", "g1", "g2", "alpha", "theta")
+BAND_FIELDS = ("albedo_d", "albedo_p")
+
+
+def platelet_area(m, w: Vec3):
+    """Ĉ_p(w) = sigma(w) = sqrt(alpha^2 + (1 - alpha^2)(w . w3)^2) in [alpha, 1] (Eq. 4.6, spec M14)."""
+    return sggx.flake_projected_area(m.alpha, sggx.mean_normal(m.theta), w)
+
+
+def extinction(m, w: Vec3):
+    """sigma_t(w) / sigma_base = c_d + (1 - c_d) Ĉ_p(w), Eq. 4.5 (even in w)."""
+    return m.c_d + (1.0 - m.c_d) * platelet_area(m, w)
+
+
+def platelet_probability(m, w: Vec3):
+    """P_p(w) = (1 - c_d) Ĉ_p(w) / sigma_t(w): the chance that a collision is with a platelet."""
+    a = (1.0 - m.c_d) * platelet_area(m, w)
+    return a / (m.c_d + a)
+
+
+def albedo(m, w: Vec3):
+    """Lambda(w), Eq. 4.7, with a trailing bands axis."""
+    a = with_bands((1.0 - m.c_d) * platelet_area(m, w))
+    cd = with_bands(m.c_d)
+    return (jnp.asarray(m.albedo_d) * cd + jnp.asarray(m.albedo_p) * a) / (cd + a)
+
+
+def diffuser_phase(m, wi: Vec3, wo: Vec3):
+    """f_d(wi, wo), the two-lobe HG mixture of Eq. 4.9 [1/sr] (no bands axis)."""
+    return mixture_value(m.w_g, m.g1, m.g2, dot(wi, wo))
+
+
+def platelet_D(m, wi: Vec3, wo: Vec3):
+    """D(wh) of the platelets' SGGX distribution at wh = normalize(wi + wo) [1/sr]."""
+    return sggx.flake_D(m.alpha, sggx.mean_normal(m.theta), normalize(wi + wo))
+
+
+def scattering(m, wi: Vec3, wo: Vec3):
+    """Lambda(wi) f(wi -> wo) of Eqs. 4.7 x 4.8 [1/sr], bands last.
+
+    Written as ``(Lambda_d c_d f_d + Lambda_p (1 - c_d) D(wh) / 4) / sigma_t(wi)``, which
+    avoids dividing by the projected area. Multiplied by ``sigma_t(wi)`` it is symmetric in
+    (wi, wo): the reciprocity of the medium, f(w -> wo) sigma_s(w) = f(wo -> w) sigma_s(wo)
+    [T:710].
+    """
+    cd = with_bands(m.c_d)
+    num = (jnp.asarray(m.albedo_d) * cd * with_bands(diffuser_phase(m, wi, wo))
+           + jnp.asarray(m.albedo_p) * (1.0 - cd) * with_bands(0.25 * platelet_D(m, wi, wo)))
+    return num / with_bands(extinction(m, wi))
+
+
+def phase(m, wi: Vec3, wo: Vec3):
+    """f(wi -> wo) of Eq. 4.8 [1/sr], bands last; normalised over wo for every wi."""
+    return scattering(m, wi, wo) / albedo(m, wi)
+
+
+def _choice_weight(p, chosen, q_clip=Q_MIN):
+    """Choose a branch of probability ``p`` with ``q = clip(stop_gradient(p))``: returns
+    ``(take, weight)`` given the uniform ``chosen``; ``weight = p / q`` or ``(1 - p) / (1 - q)``."""
+    q = jnp.clip(jax.lax.stop_gradient(p), q_clip, 1.0 - q_clip)
+    take = chosen < q
+    # safe denominators: the branch not taken may have q = 0 or 1 (no inf/NaN in its tangent)
+    w_take = p / jnp.where(q > 0, q, 1.0)
+    w_skip = (1.0 - p) / jnp.where(q < 1, 1.0 - q, 1.0)
+    return take, jnp.where(take, w_take, w_skip)
+
+
+def collide(m, wi: Vec3, u_event, u_lobe, u1, u2):
+    """Sample a scattering event of the medium at a collision (spec M15 collision kernel).
+
+    ``wi`` = -d points back along the light's travel direction; the four uniforms pick the
+    particle type, the HG lobe and the new direction. Returns ``(wo, weight)`` with
+    ``E[weight h(wo)] = int Lambda(wi) f(wi -> wo) h(wo) dwo`` (weight with bands last;
+    0 for a failed SGGX sample).
+    """
+    platelet, w_type = _choice_weight(platelet_probability(m, wi), u_event)
+    # diffuser: HG lobe 1 with probability w_g (defensive), then HG inversion about d
+    lobe1, w_lobe = _choice_weight(jnp.asarray(m.w_g), u_lobe)
+    mu, sin_t = sample_cos(jnp.where(lobe1, m.g1, m.g2), u1)
+    wo_d = direction_about(wi, mu, sin_t, 2.0 * jnp.pi * u2)
+    # platelet: a visible normal of the SGGX flakes, mirror reflection (weight 1, spec M14)
+    S = sggx.flake_matrix(m.alpha, m.theta)
+    n = sggx.sample_visible_normal(S, wi, u1, u2)
+    wo_p = normalize(reflect(wi, n))
+    ok_p = (dot(wi, n) > 0) & (dot(wo_p, wo_p) > 0.5)
+    wo = where(platelet & ok_p, wo_p, wo_d)  # a failed platelet sample keeps a valid direction
+    w_p = jnp.where(ok_p, 1.0, 0.0)
+    weight = jnp.where(with_bands(platelet), jnp.asarray(m.albedo_p) * with_bands(w_p),
+                       jnp.asarray(m.albedo_d) * with_bands(w_lobe)) * with_bands(w_type)
+    return wo, weight

@@ -1,0 +1,1 @@
+"""Monte Carlo estimators: the position-free layered random walk (:mod:`.layered`)."""
