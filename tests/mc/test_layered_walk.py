@@ -124,7 +124,11 @@ def test_white_furnace_and_truncation():
     white = lambert.Params(reflectance=1.0)
     wi = spherical_direction(jnp.array([0.3, 1.2]), jnp.array([0.0, 1.0]))
     left = {}
-    for m, t in ((dict(MEDIUM, albedo_d=1.0, albedo_p=1.0), 1.0), (dict(MEDIUM, albedo_d=1.0, albedo_p=1.0), 16.0)):
+    white_media = dict(MEDIUM, albedo_d=1.0, albedo_p=1.0)
+    # Dewy 1's single lobe (w_g = 1) and c_d = 1: branches of probability 0 must not lose energy
+    dewy1 = dict(c_d=0.9, albedo_d=1.0, albedo_p=1.0, w_g=1.0, g1=0.55, g2=0.09, alpha=0.13, theta=0.0257)
+    hg_only = dict(MEDIUM, c_d=1.0, w_g=1.0, albedo_d=1.0)
+    for m, t in ((white_media, 1.0), (white_media, 16.0), (dewy1, 16.0), (hg_only, 4.0)):
         for n in (128, 512):
             a, se, rem = layered.albedo(media(m), jnp.array([t]), wi, jax.random.key(8), n_samples=1024,
                                         max_bounces=n, bottom=layered.Bottom(lambert.MODEL, white))

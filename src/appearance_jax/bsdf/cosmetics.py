@@ -17,7 +17,6 @@ terms for the discrete choices, spec §6.4).
 
 | parameter        | default | range     | unit | meaning                                            |
 |------------------|---------|-----------|------|----------------------------------------------------|
-| thickness        | 16      | [0, 1e3]  | mfp  | layer thickness t in base mean free paths          |
 | c_d              | 0.9     | [0, 1]    | 1    | relative diffuser concentration (1 - c_d: platelets)|
 | albedo_d         | 0.95    | [0, 1]    | 1    | diffuser single-scattering albedo Lambda_d (RGB)   |
 | albedo_p         | 0.9     | [0, 1]    | 1    | platelet single-scattering albedo Lambda_p (RGB)   |
@@ -26,6 +25,7 @@ terms for the discrete choices, spec §6.4).
 | g2               | -0.2    | (-1, 1)   | 1    | asymmetry of HG lobe 2                             |
 | alpha            | 0.2     | (0, 1]    | 1    | platelet roughness alpha_p: highlight shape        |
 | theta            | 0.0     | [0, pi/2] | rad  | platelet mean-normal tilt theta_p about x          |
+| thickness        | 16      | [0, 1e3]  | mfp  | layer thickness t in base mean free paths          |
 | base_reflectance | 0.0     | [0, 1]    | 1    | albedo of the Lambertian base (RGB)                |
 
 Static settings: ``n_samples`` (paths per direction pair, 128 as in the thesis' fits
@@ -80,19 +80,11 @@ def _count(name, lo, hi):
 
 
 @params_class
-class Params:
+class Params(medium.Params):
+    """Table 4.1: the medium's fields (:class:`appearance_jax.layered.medium.Params`: c_d, albedo_d,
+    albedo_p, w_g, g1, g2, alpha, theta), the layer thickness and the base."""
+
     thickness: object = param(16.0, lo=0.0, hi=1e3, unit="mfp", doc="layer thickness t in base mean free paths")
-    c_d: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="relative diffuser concentration sigma_d / sigma_base")
-    albedo_d: object = param(0.95, lo=0.0, hi=1.0, unit="1", doc="diffuser single-scattering albedo Lambda_d",
-                             bands=True)
-    albedo_p: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="platelet single-scattering albedo Lambda_p",
-                             bands=True)
-    w_g: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="weight of the diffusers' HG lobe 1")
-    g1: object = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 1")
-    g2: object = param(-0.2, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 2")
-    alpha: object = param(0.2, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="platelet SGGX roughness alpha_p")
-    theta: object = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
-                          doc="tilt theta_p of the mean platelet normal about x (Table A.1: degrees)")
     base_reflectance: object = param(0.0, lo=0.0, hi=1.0, unit="1", doc="albedo of the Lambertian base",
                                      bands=True)
     n_samples: int = static(128, convert=_count("n_samples", 2, 2**20), doc="random-walk paths per direction pair")

@@ -291,7 +291,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         back = -d
         sig = med.extinction(m, back)
         p_c = -jnp.expm1(-sig * s_max)
-        collide, w_c = med._choice_weight(p_c, u[0], q_clip=0.0)
+        collide, w_c = med.choice_weight(p_c, u[0])
         p_cs = jnp.where(p_c > 0, p_c, 1.0)
         s = -jnp.log1p(-u[1] * p_cs) / sig
         depth_c = depth + s * d.z * -1.0  # depth grows downwards (d.z < 0)
@@ -325,7 +325,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         eta_here = eta[k]
         eta_there = jnp.where(at_top, 1.0, eta[k_next])
         F, ct, _ = _fresnel(d.z, eta_there / eta_here)
-        reflect_i, w_f = med._choice_weight(F, u[7], q_clip=0.0)
+        reflect_i, w_f = med.choice_weight(F, u[7])
         ratio = eta_here / eta_there
         d_t = Vec3(d.x * ratio, d.y * ratio, jnp.where(down, -ct, ct))
         d_r = Vec3(d.x, d.y, -d.z)
