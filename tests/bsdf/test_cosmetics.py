@@ -97,6 +97,7 @@ def test_reciprocity_of_a_tilted_preset():
     assert np.all(z < 3.0), z  # the 3 sigma
 
 
+@pytest.mark.slow  # ~12 s
 def test_azimuth_averaging_is_a_no_op_for_untilted_platelets():
     p = setting(cosmetics.PRESETS["dewy1"], theta=0.0, n_samples=2**12, max_bounces=96)
     wi, wo = in_plane(45.0, [-40.0, 0.0, 45.0])

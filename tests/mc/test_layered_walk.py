@@ -170,7 +170,7 @@ def test_reciprocity_within_noise():
     assert_close(f1, f2, np.sqrt(s1**2 + s2**2), "reciprocity", z=3.0)
 
 
-@pytest.mark.parametrize("eta", [1.0, 1.3])
+@pytest.mark.parametrize("eta", [pytest.param(1.0, marks=pytest.mark.slow), 1.3])  # 1.3: dielectric interfaces too
 def test_two_stacked_layers_equal_one(eta):
     m = dict(MEDIUM, theta=0.2)
     bottom = layered.Bottom(lambert.MODEL, lambert.Params(reflectance=0.5))

@@ -64,7 +64,7 @@ from ..core.model import with_bands
 from ..core.params import param, params_class
 from ..core.vec import Vec3, dot, normalize, where
 from ..microfacet import sggx
-from ..phase.henyey_greenstein import direction_about, sample_cos
+from ..phase.henyey_greenstein import direction_about, hg_value, sample_cos
 from ..phase.hg_mixture import mixture_value
 
 @params_class
@@ -171,10 +171,16 @@ def collide(m, wi: Vec3, u_event, u_lobe, u1, u2):
     wo_p = normalize(reflect(wi, n))
     ok = ~platelet | ((dot(wi, n) > 0) & (dot(wo_p, wo_p) > 0.5))
     wo = where(platelet & ok, wo_p, wo_d)  # a failed platelet sample keeps a valid direction
-    # one-sample mixture weight: Lambda f / (q f_p + (1 - q) f_d|q_w)
-    f_p = 0.25 * platelet_D(m, wi, wo) / platelet_area(m, wi)
-    f_dq = mixture_value(q_w, m.g1, m.g2, dot(wi, wo))
-    pdf = q * f_p + (1.0 - q) * f_dq
+    # one-sample mixture weight: Lambda f / (q f_p + (1 - q) f_d|q_w); each lobe evaluated once
+    c = dot(wi, wo)
+    h1, h2 = hg_value(m.g1, c), hg_value(m.g2, c)
+    d4 = 0.25 * platelet_D(m, wi, wo)  # = C(wi) f_p
+    area = platelet_area(m, wi)
+    pdf = q * d4 / area + (1.0 - q) * (q_w * h1 + (1.0 - q_w) * h2)
     good = ok & (pdf > 0)
-    weight = scattering(m, wi, wo) / with_bands(jnp.where(good, pdf, 1.0))
+    cd = with_bands(m.c_d)
+    f_d = with_bands(m.w_g * h1 + (1.0 - m.w_g) * h2)
+    scat = (jnp.asarray(m.albedo_d) * cd * f_d + jnp.asarray(m.albedo_p) * (1.0 - cd) * with_bands(d4)) \
+        / with_bands(m.c_d + (1.0 - m.c_d) * area)  # = scattering(m, wi, wo)
+    weight = scat / with_bands(jnp.where(good, pdf, 1.0))
     return wo, jnp.where(with_bands(good), weight, 0.0)
