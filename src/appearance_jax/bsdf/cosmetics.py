@@ -57,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.model import Model, boundary
-from ..core.params import param, params_class, static, validate
+from ..core.params import integer, param, params_class, static, validate
 from ..core.vec import Vec3
 from ..layered import medium
 from ..mc.layered import Bottom, walk
@@ -68,17 +68,6 @@ AZIMUTH_MODES = ("fixed", "averaged")
 N_BANDS = 3
 
 
-def _count(name, lo, hi):
-    def convert(v):
-        if isinstance(v, bool) or not float(v).is_integer():
-            raise ValueError(f"cosmetics.Params.{name} = {v!r} must be an integer in [{lo}, {hi}]")
-        n = int(v)
-        if not lo <= n <= hi:
-            raise ValueError(f"cosmetics.Params.{name} = {n} must be in [{lo}, {hi}]")
-        return n
-    return convert
-
-
 @params_class
 class Params(medium.Params):
     """Table 4.1: the medium's fields (:class:`appearance_jax.layered.medium.Params`: c_d, albedo_d,
@@ -87,8 +76,8 @@ class Params(medium.Params):
     thickness: object = param(16.0, lo=0.0, hi=1e3, unit="mfp", doc="layer thickness t in base mean free paths")
     base_reflectance: object = param(0.0, lo=0.0, hi=1.0, unit="1", doc="albedo of the Lambertian base",
                                      bands=True)
-    n_samples: int = static(128, convert=_count("n_samples", 2, 2**20), doc="random-walk paths per direction pair")
-    max_bounces: int = static(256, convert=_count("max_bounces", 1, 4096), doc="steps of each random walk")
+    n_samples: int = static(128, convert=integer(2, 2**20), doc="random-walk paths per direction pair")
+    max_bounces: int = static(256, convert=integer(1, 4096), doc="steps of each random walk")
     azimuth: str = static("fixed", choices=AZIMUTH_MODES,
                           doc="'fixed' sample, or 'averaged' over rotations about the normal")
 
@@ -100,21 +89,21 @@ class Params(medium.Params):
                                  f"give a scalar or {N_BANDS} (linear RGB)")
 
 
-def _stacked_media(layers: Sequence[Params]):
-    """The layers' medium fields stacked along a leading layer axis (bands broadcast to RGB)."""
+def _stack(layers: Sequence[Params]):
+    """The walk's inputs: the layers' medium fields stacked along a leading layer axis (band
+    fields broadcast to RGB) and their thicknesses (L,)."""
     def field(name):
         vals = [jnp.asarray(getattr(p, name), jnp.result_type(float)) for p in layers]
         if name in medium.BAND_FIELDS:
-            vals = [jnp.broadcast_to(jnp.atleast_1d(v), jnp.shape(v)[:-1] + (N_BANDS,)) if jnp.ndim(v) else
-                    jnp.full((N_BANDS,), v) for v in vals]
+            vals = [jnp.broadcast_to(jnp.atleast_1d(v), (N_BANDS,)) for v in vals]
         return jnp.stack(vals)
-    return medium.Params(**{n: field(n) for n in medium.FIELDS})
+    return medium.Params(**{n: field(n) for n in medium.FIELDS}), field("thickness")
 
 
 def _walk(layers, base: Bottom | None, wi, wo, key, n_samples, max_bounces, azimuth):
     key = jax.random.key(0) if key is None else key
-    thickness = jnp.stack([jnp.asarray(p.thickness, jnp.result_type(float)) for p in layers])
-    return walk(_stacked_media(layers), thickness, wi, wo, key, bottom=base, n_samples=n_samples,
+    media, thickness = _stack(layers)
+    return walk(media, thickness, wi, wo, key, bottom=base, n_samples=n_samples,
                 max_bounces=max_bounces, azimuth_average=azimuth == "averaged", n_bands=N_BANDS)
 
 
@@ -131,8 +120,8 @@ eval = boundary(_eval, Params)
 
 def _albedo(p: Params, wi: Vec3, key=None, n_samples: int = 4096):
     key = jax.random.key(0) if key is None else key
-    thickness = jnp.asarray(p.thickness, jnp.result_type(float))[None]
-    a, se, _ = albedo_walk(_stacked_media([p]), thickness, wi, key, bottom=_lambert_base(p), n_samples=n_samples,
+    media, thickness = _stack([p])
+    a, se, _ = albedo_walk(media, thickness, wi, key, bottom=_lambert_base(p), n_samples=n_samples,
                            max_bounces=p.max_bounces, n_bands=N_BANDS)
     return a, se
 
@@ -164,22 +153,8 @@ def eval_stack(layers: Sequence[Params], wi: Vec3, wo: Vec3, key=None, *, base=N
         if model.sample is None:
             raise ValueError(f"base model {model.name!r} has no sampler; the random walk needs one")
         bottom = Bottom(model, bp)
-    top = layers[0]
-    fn = _stack_fn(bottom.model, top.n_samples, top.max_bounces, top.azimuth)
-    return fn(tuple(layers), bottom.params, wi, wo, key)
-
-
-_STACK_FNS: dict = {}
-
-
-def _stack_fn(model, n_samples, max_bounces, azimuth):
-    """One jitted walk per (base model, sampling settings), reused across calls."""
-    k = (id(model), n_samples, max_bounces, azimuth)
-    if k not in _STACK_FNS:
-        def fn(layers, base_params, wi, wo, key):
-            return _walk(list(layers), Bottom(model, base_params), wi, wo, key, n_samples, max_bounces, azimuth)
-        _STACK_FNS[k] = (model, jax.jit(fn))  # keep the model alive so its id stays unique
-    return _STACK_FNS[k][1]
+    top = layers[0]  # mc.layered.walk is jitted: one compilation per base model and settings
+    return _walk(layers, bottom, wi, wo, key, top.n_samples, top.max_bounces, top.azimuth)
 
 
 _DEG = math.pi / 180.0

@@ -147,7 +147,7 @@ import numpy as np
 from ..core import spectral, warp
 from ..core.linalg import solve_diagonally_dominant
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class, static
+from ..core.params import check_int, integer, param, params_class, static
 from ..core.quadrature import gauss_legendre
 from ..core.rng import is_prng_key, uniforms
 from ..core.vec import Vec3
@@ -155,15 +155,6 @@ from ..optics.thinfilm import airy
 
 ABSORPTION_FORMS = ("product", "beer_sum")
 UNDERSIDE_MODES = ("top", "airy")
-
-
-def _n_nodes(v) -> int:
-    if isinstance(v, bool) or not float(v).is_integer():
-        raise ValueError("n_nodes must be an integer")
-    n = int(v)
-    if not 8 <= n <= 1024:
-        raise ValueError("n_nodes must be in [8, 1024]")
-    return n
 
 
 @params_class
@@ -184,7 +175,7 @@ class Params:
     color: str = static("rgb3", choices=spectral.COLOR_MODES, doc="output bands: rgb3, cie or spectral")
     wavelengths: tuple = static(spectral.RGB_WAVELENGTHS, convert=spectral.wavelengths_tuple,
                                 doc="wavelengths (nm) of the 'spectral' colour mode")
-    n_nodes: int = static(48, convert=_n_nodes, doc="Gauss-Legendre nodes of the Nyström solve")
+    n_nodes: int = static(48, convert=integer(8, 1024), doc="Gauss-Legendre nodes of the Nyström solve")
 
     def _validate(self):
         n_wl = spectral.band_wavelengths_np(self.color, self.wavelengths).size
@@ -548,12 +539,6 @@ def sample_full(params: Params, wi: Vec3, u_or_key):
     return _sample_full_b(params, wi, u_or_key)
 
 
-def _check_int(name, v, lo=1):
-    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-        raise ValueError(f"snake.eval_mc: {name} = {v!r} must be an integer >= {lo}")
-    return int(v)
-
-
 def eval_mc(params: Params, wi: Vec3, wo: Vec3, key, n_paths: int = 4096, max_bounces: int = 64,
             roulette: bool = False):
     """Monte Carlo estimate of the non-delta part f_d and its standard error (bands).
@@ -576,8 +561,8 @@ def eval_mc(params: Params, wi: Vec3, wo: Vec3, key, n_paths: int = 4096, max_bo
     on the parameters, so gradients of the estimate are consistent). ``key``: a PRNG key
     or an int seed.
     """
-    n_paths = _check_int("n_paths", n_paths, 2)
-    max_bounces = _check_int("max_bounces", max_bounces, 1)
+    n_paths = check_int("snake.eval_mc: n_paths", n_paths, 2)
+    max_bounces = check_int("snake.eval_mc: max_bounces", max_bounces, 1)
     if isinstance(key, (int, np.integer)) and not isinstance(key, bool):
         key = jax.random.key(int(key))
     elif not is_prng_key(key):

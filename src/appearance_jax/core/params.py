@@ -100,6 +100,11 @@ def _to_array(v):
     return v
 
 
+def _label(cls) -> str:
+    """"rough_conductor.Params": every model's class is called Params, so name its module too."""
+    return f"{cls.__module__.rsplit('.', 1)[-1]}.{cls.__name__}"
+
+
 def params_class(cls):
     """Class decorator: frozen dataclass + pytree registration + conversions.
 
@@ -111,6 +116,7 @@ def params_class(cls):
     # Installed before the dataclass is made, so that the generated __init__ calls it.
     def __post_init__(self):
         klass = type(self)
+        label = _label(klass)
         for name in klass._data_fields:
             object.__setattr__(self, name, _to_array(getattr(self, name)))
         for name in klass._static_fields:
@@ -120,11 +126,11 @@ def params_class(cls):
                 try:
                     v = spec.convert(v)
                 except (TypeError, ValueError) as e:
-                    raise ValueError(f"{klass.__name__}.{name} = {v!r}: {e}") from None
+                    raise ValueError(f"{label}.{name} = {v!r}: {e}") from None
                 object.__setattr__(self, name, v)
             if spec.choices is not None and v not in spec.choices:
                 raise ValueError(
-                    f"{klass.__name__}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"
+                    f"{label}.{name} = {v!r} is not one of the valid choices {list(spec.choices)}"
                 )
         if user_post_init is not None:
             user_post_init(self)
@@ -163,30 +169,73 @@ def validate(params, expected_cls: type | None = None) -> None:
             f"expected parameters of type {expected_cls.__qualname__}, got {type(params).__qualname__}"
         )
     cls = type(params)
-    # "rough_conductor.Params": every model's class is called Params, so name its module too
-    label = f"{cls.__module__.rsplit('.', 1)[-1]}.{cls.__name__}"
+    label = _label(cls)
     for name, spec in param_specs(cls).items():
-        if not isinstance(spec, ParamSpec):
-            continue
-        v = getattr(params, name)
-        if v is None or _is_traced(v):  # None: an optional field left unset (no pytree leaf)
-            continue
-        try:
-            a = np.asarray(v, dtype=float)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"{label}.{name} = {v!r} is not numeric") from e
-        bad = ~np.isfinite(a) | ~spec.contains(a)
-        if np.any(bad):
-            first = a[bad].flat[0] if a.ndim else a
-            what = "is not finite; valid range" if not np.isfinite(first) else "is outside the valid range"
-            raise ValueError(
-                f"{label}.{name} = {float(first):g} {what} {spec.range_str()}"
-                + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
-                + (f" ({spec.doc})" if spec.doc else "")
-            )
+        if isinstance(spec, ParamSpec):
+            check_value(f"{label}.{name}", getattr(params, name), spec)
     extra = getattr(params, "_validate", None)
     if extra is not None and not any(_is_traced(getattr(params, n)) for n in cls._data_fields):
         extra()
+
+
+def check_value(label: str, v, spec: ParamSpec) -> None:
+    """Raise ``ValueError`` naming ``label`` if a concrete ``v`` is non-finite or outside ``spec``'s range.
+
+    ``None`` and traced values pass (checks happen eagerly, at public boundaries). Used by
+    :func:`validate` and by functions that take bare numbers (e.g. the layered references).
+    """
+    if v is None or _is_traced(v):  # None: an optional field left unset (no pytree leaf)
+        return
+    try:
+        a = np.asarray(v, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{label} = {v!r} is not numeric") from e
+    bad = ~np.isfinite(a) | ~spec.contains(a)
+    if np.any(bad):
+        first = a[bad].flat[0] if a.ndim else a
+        what = "is not finite; valid range" if not np.isfinite(first) else "is outside the valid range"
+        raise ValueError(
+            f"{label} = {float(first):g} {what} {spec.range_str()}"
+            + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
+            + (f" ({spec.doc})" if spec.doc else "")
+        )
+
+
+def _as_int(v, strict: bool):
+    """``int(v)`` if ``v`` is an integer (``strict``: of an integer type), else None."""
+    if isinstance(v, (bool, np.bool_)):
+        return None
+    if isinstance(v, (int, np.integer)):
+        return int(v)
+    if strict:
+        return None
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return None
+    return int(f) if f.is_integer() else None
+
+
+def _int_range(lo: int, hi: int | None) -> str:
+    return f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
+
+
+def check_int(label: str, v, lo: int = 1, hi: int | None = None) -> int:
+    """A count argument (of an integer type) in [lo, hi]; ``ValueError`` naming ``label`` otherwise."""
+    n = _as_int(v, strict=True)
+    if n is None or n < lo or (hi is not None and n > hi):
+        raise ValueError(f"{label} = {v!r} must be an integer {_int_range(lo, hi)}")
+    return n
+
+
+def integer(lo: int, hi: int | None = None):
+    """``static(convert=integer(lo, hi))``: an integer setting (integral floats and strings accepted)."""
+    def convert(v):
+        n = _as_int(v, strict=False)
+        if n is None or n < lo or (hi is not None and n > hi):
+            raise ValueError(f"must be an integer {_int_range(lo, hi)}")
+        return n
+    return convert
 
 
 def describe(params_or_cls) -> list[dict[str, Any]]:

@@ -101,6 +101,7 @@ alone, black bottom), :func:`fourier_kernels` (all modes on a cosine grid).
 
 from __future__ import annotations
 
+import math
 from functools import partial
 from typing import Any, NamedTuple
 
@@ -109,6 +110,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.linalg import solve_diagonally_dominant
+from ..core.params import ParamSpec, check_int, check_value
 from ..core.quadrature import gauss_legendre
 from ..core.vec import Vec3
 
@@ -133,28 +135,13 @@ class HGLayer(NamedTuple):
 # validation (eager, at the public boundary; skipped for traced values)
 
 
-def _concrete(v):
-    return not isinstance(v, jax.core.Tracer)
-
-
 def _check_range(name, v, lo, hi, lo_open=False, hi_open=False):
-    if not _concrete(v):
-        return
-    a = np.asarray(v, dtype=float)
-    bad = ~np.isfinite(a)
-    bad |= (a <= lo) if lo_open else (a < lo)
-    if hi is not None:
-        bad |= (a >= hi) if hi_open else (a > hi)
-    if np.any(bad):
-        lb = "(" if lo_open else "["
-        rb = ")" if hi_open else "]"
-        hi_s = "inf" if hi is None else f"{hi:g}"
-        raise ValueError(f"adding_doubling: {name} = {a} must lie in {lb}{lo:g}, {hi_s}{rb}")
+    hi = math.inf if hi is None else hi
+    check_value(f"adding_doubling: {name}", v, ParamSpec(lo, hi, lo_open, hi_open))
 
 
 def _check_int(name, v):
-    if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)) or v < 1:
-        raise ValueError(f"adding_doubling: {name} = {v!r} must be a positive int")
+    check_int(f"adding_doubling: {name}", v)
 
 
 def _as_layers(layers) -> tuple:

@@ -52,7 +52,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -60,7 +60,7 @@ import jax.numpy as jnp
 from ..core.model import with_bands
 from ..core.vec import Vec3, where
 from ..layered import medium as med
-from ..optics.fresnel import snell_cos_t
+from ..optics.fresnel import fresnel_dielectric
 
 _TINY = 1e-12
 
@@ -95,15 +95,9 @@ jax.tree_util.register_pytree_node(
 
 
 def _fresnel(cos_i, eta_ratio):
-    """Unpolarised Fresnel reflectance for |cos_i| and eta_t / eta_i; cos_t (>= 0) and TIR flag."""
-    ci = jnp.abs(cos_i)
-    ct, valid = snell_cos_t(ci, eta_ratio)
-    ds = jnp.where(ci + eta_ratio * ct > 0, ci + eta_ratio * ct, 1.0)
-    dp = jnp.where(eta_ratio * ci + ct > 0, eta_ratio * ci + ct, 1.0)
-    rs = (ci - eta_ratio * ct) / ds
-    rp = (eta_ratio * ci - ct) / dp
-    F = jnp.where(valid, 0.5 * (rs * rs + rp * rp), 1.0)
-    return F, jnp.where(valid, ct, 0.0), valid
+    """Unpolarised Fresnel reflectance for |cos_i| and eta_t / eta_i, and cos_t >= 0 (0 under TIR)."""
+    F, cos_t, _, _ = fresnel_dielectric(jnp.abs(cos_i), eta_ratio)
+    return F, -cos_t  # fresnel_dielectric's cos_t has the sign opposite to cos_i
 
 
 def _pick(stacked, k, n_layers: int, bands: bool = False):
@@ -120,21 +114,9 @@ def _pick(stacked, k, n_layers: int, bands: bool = False):
 
 
 def _layer(media, k, n_layers):
-    """The medium parameters of layer ``k`` (per path) as a simple namespace."""
-    return _Medium(**{name: _pick(getattr(media, name), k, n_layers, name in med.BAND_FIELDS)
-                      for name in med.FIELDS})
-
-
-@dataclass(frozen=True)
-class _Medium:
-    c_d: Any
-    albedo_d: Any
-    albedo_p: Any
-    w_g: Any
-    g1: Any
-    g2: Any
-    alpha: Any
-    theta: Any
+    """The medium parameters of layer ``k`` (per path)."""
+    return med.Params(**{name: _pick(getattr(media, name), k, n_layers, name in med.BAND_FIELDS)
+                         for name in med.FIELDS})
 
 
 def _inside(w: Vec3, eta):
@@ -174,7 +156,7 @@ def walk(media, thickness, wi: Vec3, wo: Vec3, key, *, eta=None, bottom: Bottom 
         azimuth_average: rotate each path's (wi, wo) pair by a uniform random azimuth
             about the normal: the BSDF of the sample rotated uniformly about n (spec §4.1,
             ``azimuth_mode = "averaged"``).
-        n_bands: number of output bands (default: from the albedos and the bottom).
+        n_bands: number of output bands (default: from the albedos).
 
     Returns:
         ``(f, stderr)``, each of shape ``S + (B,)``. Directions at or below the horizon give 0.
@@ -210,7 +192,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         n_bands = max(jnp.shape(jnp.atleast_1d(media.albedo_d))[-1] if jnp.ndim(media.albedo_d) > 1 else 1,
                       jnp.shape(jnp.atleast_1d(media.albedo_p))[-1] if jnp.ndim(media.albedo_p) > 1 else 1)
     B = n_bands
-    media = _Medium(**{n: (jnp.broadcast_to(jnp.asarray(getattr(media, n)).reshape(L, -1), (L, B))
+    media = med.Params(**{n: (jnp.broadcast_to(jnp.asarray(getattr(media, n)).reshape(L, -1), (L, B))
                            if n in med.BAND_FIELDS else jnp.broadcast_to(jnp.asarray(getattr(media, n)), (L,)))
                        for n in med.FIELDS})
     z_top = jnp.concatenate([jnp.zeros((1,), thickness.dtype), jnp.cumsum(thickness)[:-1]])
@@ -238,10 +220,10 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
     for j in range(L):
         wj, mj = _inside(wo, eta[j])
         # interface above layer j: from index eta[j] up into eta_above[j]
-        F, _, _ = _fresnel(mj, eta_above[j] / eta[j])
+        F, _ = _fresnel(mj, eta_above[j] / eta[j])
         T_up = T_up * jnp.where(mj > 0, 1.0 - F, 0.0)
         mj_safe = jnp.where(mj > 0, mj, 1.0)
-        m_j = _Medium(**{n: getattr(media, n)[j] for n in med.FIELDS})
+        m_j = med.Params(**{n: getattr(media, n)[j] for n in med.FIELDS})
         sj = med.extinction(m_j, wj)
         wo_in.append(wj)
         mu_in.append(mj_safe)
@@ -250,21 +232,16 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         tau_above.append(tau_acc)
         tau_acc = tau_acc + sj * thickness[j] / mj_safe
 
-    def pick_list(lst, k):
-        return _pick(lst, k, L) if L > 1 else lst[0]
-
     def pick_vec(lst, k):
-        return Vec3(pick_list([v.x for v in lst], k), pick_list([v.y for v in lst], k),
-                    pick_list([v.z for v in lst], k))
+        return Vec3(*(_pick([getattr(v, c) for v in lst], k, L) for c in "xyz"))
 
     def transmittance_up(depth, k):
         """Tr_up x interface factors from depth inside layer k to the viewer."""
-        mk = pick_list(mu_in, k)
-        return pick_list(factor, k) * jnp.exp(-pick_list(tau_above, k)
-                                              - pick_list(sig_o, k) * (depth - z_top[k]) / mk)
+        mk = _pick(mu_in, k, L)
+        return _pick(factor, k, L) * jnp.exp(-_pick(tau_above, k, L) - _pick(sig_o, k, L) * (depth - z_top[k]) / mk)
 
     # --- entering: refraction into layer 0
-    F0, ct0, _ = _fresnel(jnp.where(ok, wi.z, 1.0), eta[0])
+    F0, ct0 = _fresnel(jnp.where(ok, wi.z, 1.0), eta[0])
     d0 = Vec3(-wi.x / eta[0], -wi.y / eta[0], -ct0)
     beta0 = with_bands(jnp.where(ok, 1.0 - F0, 0.0)) * jnp.ones(shape + (B,))
     depth0 = jnp.zeros(shape)
@@ -278,7 +255,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         kL = jnp.full(shape, L - 1, jnp.int32)
         wL = wo_in[L - 1]
         f_b = jnp.asarray(bottom.model.eval.kernel(bottom.params, wb_in, wL))
-        return beta * f_b * with_bands(mu_in[L - 1] * transmittance_up(z_bot[L - 1] + 0.0 * kL, kL))
+        return beta * f_b * with_bands(mu_in[L - 1] * transmittance_up(z_bot[L - 1], kL))
 
     def step(carry, step_key):
         depth, k, d, beta, acc, order = carry
@@ -294,7 +271,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         collide, w_c = med.choice_weight(p_c, u[0])
         p_cs = jnp.where(p_c > 0, p_c, 1.0)
         s = -jnp.log1p(-u[1] * p_cs) / sig
-        depth_c = depth + s * d.z * -1.0  # depth grows downwards (d.z < 0)
+        depth_c = depth - s * d.z  # depth grows downwards (d.z < 0)
         depth_c = jnp.clip(depth_c, z_top[k], z_bot[k])
         beta = beta * with_bands(w_c)
 
@@ -324,7 +301,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         k_next = jnp.clip(jnp.where(down, k + 1, k - 1), 0, L - 1)
         eta_here = eta[k]
         eta_there = jnp.where(at_top, 1.0, eta[k_next])
-        F, ct, _ = _fresnel(d.z, eta_there / eta_here)
+        F, ct = _fresnel(d.z, eta_there / eta_here)
         reflect_i, w_f = med.choice_weight(F, u[7])
         ratio = eta_here / eta_there
         d_t = Vec3(d.x * ratio, d.y * ratio, jnp.where(down, -ct, ct))
