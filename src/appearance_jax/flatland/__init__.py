@@ -1,0 +1,18 @@
+"""Flatland (2.5D) tracer: 2D cross-sections with 3D directions, the ground truth for fiber,
+drop and barbule models (spec seed-001 §4, seed-000 §5 and M22, seed-002 §1.2.5).
+
+- :mod:`.geometry`: exact ellipse / arc intersection (no epsilons), normals, tangent points.
+- :mod:`.section`: cross-sections (:class:`Section`), builders :func:`fiber`,
+  :func:`cylinder`, :func:`ellipse_row`.
+- :mod:`.interfaces`: the scattering events (smooth / rough dielectric, thin film, diffuse).
+- :mod:`.tracer`: :func:`trace`, the scan over events with per-lobe emissions.
+- :mod:`.tallies`: far-field histograms and the BCSDF (:func:`trace_fiber`,
+  :func:`bcsdf_from_histogram`), per-lobe albedo, the deterministic smooth mode
+  (:func:`smooth_lobes`), the camera-side next-event estimator (:func:`nee_bcsdf`).
+"""
+
+from .section import Interface, Medium, Section, Shape, cylinder, ellipse_row, fiber
+from .tracer import Records, launch, n_bands, trace
+from .tallies import (BCSDF, Histogram, SmoothLobes, bcsdf_from_histogram, masking_fraction, nee_bcsdf,
+                      smooth_lobes, trace_fiber)
+from .caustics import Caustics, caustics

@@ -1,0 +1,284 @@
+"""Tallies of the flatland tracer: far-field histograms, the BCSDF, per-lobe albedo, the
+deterministic smooth mode and the camera-side next-event estimator.
+
+Flux bookkeeping (spec seed-001 §4.3 item 6; Huang 2022 Eqs. 4.9-4.10, 4.27): rays are
+launched uniformly over the projected width 2 D_i of the object, so each carries the flux
+2 D_i cos(theta_i) / N per unit fiber length (unit irradiance). A histogram bin of solid
+angle dOmega = (sin theta_1 - sin theta_0) dphi collecting power W estimates the density
+p(omega_o) = W / (N dOmega), and the BCSDF (Huang's convention, per unit projected width of
+the outgoing side) is
+
+    S(omega_i, omega_o) = (D_i / D_o) p(omega_o) / cos(theta_o),
+
+so that the integral of S cos(theta_o) D_o / D_i over the sphere is the albedo. For a
+circle D = 1. Angles follow :func:`core.frame.fiber_angles` (x = fiber axis).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..core import vec as V
+from ..core.frame import fiber_angles
+from ..core.params import check_int
+from ..core.quadrature import gauss_legendre
+from ..core.vec import Vec3
+from . import geometry as G
+from .section import Section
+from .tracer import _trace, launch, n_bands
+
+
+class Histogram(NamedTuple):
+    """Far-field tallies of :func:`trace_fiber` (sums over all paths)."""
+
+    power: jax.Array        # sum of emitted power, (lobes, n_theta, n_phi, bands)
+    power_sq: jax.Array     # sum over paths of (per-path power in the bin)^2
+    s_sum: jax.Array        # sum of power * D_i / (D_o cos theta_o) (the BCSDF estimator)
+    s_sq: jax.Array         # its per-path squares
+    n_paths: int
+    theta_edges: jax.Array  # (n_theta + 1,) radians, [-pi/2, pi/2]
+    phi_edges: jax.Array    # (n_phi + 1,) radians, [-pi, pi]
+    albedo: jax.Array       # per-lobe albedo (power fraction), (lobes, bands)
+    absorbed: jax.Array     # (bands,) fractions of the incident power
+    lost: jax.Array
+    residual: jax.Array
+
+
+def _outer_half_width(section: Section, d: Vec3):
+    o = section.outer()
+    n2 = jnp.sqrt(d.y * d.y + d.z * d.z)
+    inv = jnp.where(n2 > 0, 1.0 / jnp.where(n2 > 0, n2, 1.0), 0.0)
+    return G.half_width(d.y * inv, d.z * inv, o.a, o.b, o.psi)
+
+
+@partial(jax.jit, static_argnames=("n_chunks", "chunk", "n_theta", "n_phi", "n_lobes", "max_events",
+                                   "mode"))
+def _histogram(section, wi, key, n_chunks, chunk, n_theta, n_phi, n_lobes, max_events, mode):
+    dtype = jnp.result_type(float)
+    nb = n_bands(section)
+    _, _, D_i = launch(section, wi, jnp.zeros((1,), dtype))
+    D_i = D_i[0] if jnp.ndim(D_i) else D_i
+    t_edges = jnp.linspace(-jnp.pi / 2, jnp.pi / 2, n_theta + 1, dtype=dtype)
+    p_edges = jnp.linspace(-jnp.pi, jnp.pi, n_phi + 1, dtype=dtype)
+    n_bins = n_lobes * n_theta * n_phi
+
+    def one(carry, k):
+        kh, kt = jax.random.split(k)
+        # stratified offsets: one jittered sample per stratum of [-1, 1]
+        u = (jnp.arange(chunk, dtype=dtype) + jax.random.uniform(kh, (chunk,), dtype)) / chunk
+        h = 2.0 * u - 1.0
+        rec = _trace(section, wi, h, kt, None, max_events, mode, False, False)
+        th, ph = fiber_angles(rec.direction)
+        it = jnp.clip(jnp.floor((th + jnp.pi / 2) / jnp.pi * n_theta).astype(jnp.int32), 0, n_theta - 1)
+        ip = jnp.clip(jnp.floor((ph + jnp.pi) / (2 * jnp.pi) * n_phi).astype(jnp.int32), 0, n_phi - 1)
+        lobe = jnp.clip(rec.lobe, 0, n_lobes - 1)
+        idx = (lobe * n_theta + it) * n_phi + ip                        # (E, N)
+        w = rec.weight                                                  # (E, N, nb)
+        D_o = _outer_half_width(section, rec.direction)
+        cos_o = jnp.cos(th)
+        ok = cos_o > 1e-6
+        sw = jnp.where(ok[..., None], w * (D_i / jnp.where(ok, D_o * cos_o, 1.0))[..., None], 0.0)
+        # squares per event: the events of one path fall in different lobes (p grows by at
+        # least one between emissions), except in the catch-all last lobe, whose standard
+        # error therefore treats a path's emissions as independent
+        flat = idx.reshape(-1)
+        wf, sf = w.reshape(-1, nb), sw.reshape(-1, nb)
+        out = dict(power=jax.ops.segment_sum(wf, flat, n_bins), power_sq=jax.ops.segment_sum(wf * wf, flat, n_bins),
+                   s_sum=jax.ops.segment_sum(sf, flat, n_bins), s_sq=jax.ops.segment_sum(sf * sf, flat, n_bins),
+                   absorbed=rec.absorbed.sum(0), lost=rec.lost.sum(0), residual=rec.residual.sum(0))
+        out["albedo"] = jax.ops.segment_sum(w.reshape(-1, nb), lobe.reshape(-1), n_lobes)
+        return jax.tree_util.tree_map(jnp.add, carry, out), None
+
+    zero = dict(power=jnp.zeros((n_bins, nb), dtype), power_sq=jnp.zeros((n_bins, nb), dtype),
+                s_sum=jnp.zeros((n_bins, nb), dtype), s_sq=jnp.zeros((n_bins, nb), dtype),
+                albedo=jnp.zeros((n_lobes, nb), dtype), absorbed=jnp.zeros((nb,), dtype),
+                lost=jnp.zeros((nb,), dtype), residual=jnp.zeros((nb,), dtype))
+    acc, _ = jax.lax.scan(one, zero, jax.random.split(key, n_chunks))
+    shape = (n_lobes, n_theta, n_phi, nb)
+    n = n_chunks * chunk
+    return Histogram(acc["power"].reshape(shape), acc["power_sq"].reshape(shape), acc["s_sum"].reshape(shape),
+                     acc["s_sq"].reshape(shape), n, t_edges, p_edges, acc["albedo"] / n, acc["absorbed"] / n,
+                     acc["lost"] / n, acc["residual"] / n)
+
+
+def trace_fiber(section: Section, wi: Vec3, key, n_paths: int = 2 ** 16, *, n_theta: int = 90,
+                n_phi: int = 180, n_lobes: int = 4, max_events: int = 16, mode: str = "split",
+                chunk: int = 2 ** 14) -> Histogram:
+    """Trace ``n_paths`` rays from the direction ``wi`` (a single unit :class:`Vec3`) and
+    tally the emitted power per lobe (p = 0, ..., n_lobes - 1; the last collects p >= n_lobes
+    - 1), per (theta_o, phi_o) bin and per band.
+
+    Paths run in chunks of ``chunk`` rays inside one ``lax.scan`` (memory stays
+    ~ max_events x chunk), so 1e8+ paths need no Python loop; ``n_paths`` is rounded up to a
+    multiple of ``chunk``. Offsets h are stratified over [-1, 1] within each chunk.
+    Convert with :func:`bcsdf_from_histogram`.
+    """
+    section = section.validate()
+    if section.periodic:
+        raise ValueError("flatland.trace_fiber: periodic rows have no BCSDF; use "
+                         "flatland.masking_fraction or flatland.trace")
+    check_int("flatland.trace_fiber.n_paths", n_paths, 1)
+    chunk = min(check_int("flatland.trace_fiber.chunk", chunk, 1), int(n_paths))
+    for name, v in (("n_theta", n_theta), ("n_phi", n_phi), ("n_lobes", n_lobes), ("max_events", max_events)):
+        check_int(f"flatland.trace_fiber.{name}", v, 1)
+    n_chunks = -(-int(n_paths) // chunk)
+    return _histogram(section, wi, key, n_chunks, chunk, int(n_theta), int(n_phi), int(n_lobes),
+                      int(max_events), mode)
+
+
+class BCSDF(NamedTuple):
+    """Bin averages of the BCSDF and the density, with standard errors."""
+
+    S: jax.Array            # mean of S over each bin (1/sr), (lobes, n_theta, n_phi, bands)
+    S_se: jax.Array
+    density: jax.Array      # p(omega_o) = power / (N dOmega)  (1/sr)
+    density_se: jax.Array
+    theta: jax.Array        # bin centres (rad)
+    phi: jax.Array
+
+
+def bcsdf_from_histogram(hist: Histogram) -> BCSDF:
+    """S(omega_i, omega_o) = (D_i / D_o) p(omega_o) / cos(theta_o), averaged over each bin,
+    with standard errors from the per-path spread (Huang 2022 Eqs. 4.9-4.10, 4.27)."""
+    te, pe = hist.theta_edges, hist.phi_edges
+    d_omega = (jnp.sin(te[1:]) - jnp.sin(te[:-1]))[:, None] * (pe[1:] - pe[:-1])[None, :]
+    d_omega = d_omega[None, :, :, None]
+    n = hist.n_paths
+
+    def mean_se(s, sq):
+        m = s / n
+        var = jnp.maximum(sq / n - m * m, 0.0) / max(n - 1, 1)
+        return m / d_omega, jnp.sqrt(var) / d_omega
+
+    S, S_se = mean_se(hist.s_sum, hist.s_sq)
+    p, p_se = mean_se(hist.power, hist.power_sq)
+    return BCSDF(S, S_se, p, p_se, 0.5 * (te[1:] + te[:-1]), 0.5 * (pe[1:] + pe[:-1]))
+
+
+class SmoothLobes(NamedTuple):
+    """Deterministic lobes of a smooth section from a Gauss-Legendre quadrature over h."""
+
+    h: jax.Array            # nodes, (n_h,)
+    weight: jax.Array       # quadrature weights / 2 (sum to 1), (n_h,)
+    phi: jax.Array          # exit azimuth per event and node, (events, n_h)
+    theta: jax.Array        # exit longitudinal angle
+    power: jax.Array        # A_p(h) per event and node, (events, n_h, bands)
+    lobe: jax.Array         # p per event and node
+    albedo: jax.Array       # per-lobe albedo (1/2) int A_p(h) dh, (n_lobes, bands)
+
+
+def smooth_lobes(section: Section, wi: Vec3, n_h: int = 256, *, n_lobes: int = 4, max_events: int = 16,
+                 panels: int = 8) -> SmoothLobes:
+    """The smooth-section mode: no randomness, a composite Gauss-Legendre rule over
+    h = sin(u).
+
+    Each node is traced in split mode, so lobe p carries exactly A_p(h) (Fresnel products
+    and Beer-Lambert attenuation) and leaves at Phi_p(h); the per-lobe albedo
+    (1/2) int A_p(h) dh is exact up to the quadrature (spec seed-001 §4.3 item 7; H-5).
+    Rough interfaces are rejected: use :func:`trace_fiber`.
+    """
+    section = section.validate()
+    for s in section.shapes:
+        if s.interface.rough or s.interface.kind == "diffuse":
+            raise ValueError("flatland.smooth_lobes needs smooth, non-diffuse interfaces; "
+                             "use flatland.trace_fiber for rough or diffuse ones")
+    check_int("flatland.smooth_lobes.n_h", n_h, 1)
+    check_int("flatland.smooth_lobes.panels", panels, 1)
+    per = -(-int(n_h) // int(panels))
+    x, w = gauss_legendre(per)
+    x, w = np.asarray(x), np.asarray(w)
+    # h = sin(u): the Fresnel factors have a square-root edge at h = +-1 (grazing entry),
+    # which the substitution makes smooth (composite Gauss-Legendre in u)
+    edges = np.linspace(-np.pi / 2, np.pi / 2, int(panels) + 1)
+    us = np.concatenate([0.5 * (edges[k + 1] - edges[k]) * x + 0.5 * (edges[k + 1] + edges[k])
+                         for k in range(int(panels))])
+    wu = np.concatenate([0.5 * (edges[k + 1] - edges[k]) * w for k in range(int(panels))])
+    hs, ws = np.sin(us), 0.5 * wu * np.cos(us)
+    dtype = jnp.result_type(float)
+    hs, ws = jnp.asarray(hs, dtype), jnp.asarray(ws, dtype)
+    rec = _trace(section, wi, hs, jax.random.PRNGKey(0), None, int(max_events), "split", False, False)
+    th, ph = fiber_angles(rec.direction)
+    lobe = jnp.clip(rec.lobe, 0, n_lobes - 1)
+    alb = jax.ops.segment_sum((rec.weight * ws[None, :, None]).reshape(-1, rec.weight.shape[-1]),
+                              lobe.reshape(-1), n_lobes)
+    return SmoothLobes(hs, ws, ph, th, rec.weight, rec.lobe, alb)
+
+
+@partial(jax.jit, static_argnames=("n_chunks", "chunk", "n_lobes", "max_events"))
+def _nee(section, wi, wo, key, n_chunks, chunk, n_lobes, max_events):
+    dtype = jnp.result_type(float)
+    nb = n_bands(section)
+
+    def one(carry, k):
+        kh, kt = jax.random.split(k)
+        u = (jnp.arange(chunk, dtype=dtype) + jax.random.uniform(kh, (chunk,), dtype)) / chunk
+        rec = _trace(section, wo, 2.0 * u - 1.0, kt, None, max_events, "random", False, False, True, wi)
+        lobe = jnp.clip(rec.lobe, 0, n_lobes - 1)
+        path = jnp.broadcast_to(jnp.arange(chunk), lobe.shape)
+        per = jax.ops.segment_sum(rec.weight.reshape(-1, nb), (lobe * chunk + path).reshape(-1),
+                                  n_lobes * chunk).reshape(n_lobes, chunk, nb)
+        s, sq = carry
+        return (s + per.sum(1), sq + (per * per).sum(1)), None
+
+    z = jnp.zeros((n_lobes, nb), dtype)
+    (s, sq), _ = jax.lax.scan(one, (z, z), jax.random.split(key, n_chunks))
+    n = n_chunks * chunk
+    m = s / n
+    se = jnp.sqrt(jnp.maximum(sq / n - m * m, 0.0) / max(n - 1, 1))
+    return m, se
+
+
+def nee_bcsdf(section: Section, wi: Vec3, wo: Vec3, key, n_paths: int = 2 ** 14, *, n_lobes: int = 4,
+              max_events: int = 16, chunk: int = 2 ** 14):
+    """Camera-side next-event estimate of S(omega_i, omega_o) cos(theta_i) per lobe.
+
+    Rays are launched from ``wo`` (the viewer) uniformly over the projected width 2 D_o and
+    followed with the tracer's random choices; every hit on a rough interface bordering the
+    exterior is connected to the delta light ``wi`` (unit irradiance) through the interface's
+    BSDF (:func:`interfaces.dielectric_eval`), in the lobe of the path so far. The mean is
+    S cos(theta_i) by reciprocity (spec seed-001 §4.3 item 6b; what the thesis's Mitsuba
+    set-up computes). Gives pointwise values with much lower variance than histograms for
+    glossy lobes; smooth interfaces contribute nothing (delta lobes). Returns
+    ``(value, stderr)`` of shape (n_lobes, bands).
+    """
+    section = section.validate()
+    if section.periodic:
+        raise ValueError("flatland.nee_bcsdf needs a bounded section")
+    if not any(s.interface.rough for s in section.shapes):
+        raise ValueError("flatland.nee_bcsdf needs a rough interface (smooth lobes are deltas); "
+                         "use flatland.smooth_lobes")
+    check_int("flatland.nee_bcsdf.n_paths", n_paths, 1)
+    chunk = min(check_int("flatland.nee_bcsdf.chunk", chunk, 1), int(n_paths))
+    n_chunks = -(-int(n_paths) // chunk)
+    return _nee(section, wi, wo, key, n_chunks, chunk, int(n_lobes), int(max_events))
+
+
+@partial(jax.jit, static_argnames=("n",))
+def _masking(section, wo, key, n):
+    dtype = jnp.result_type(float)
+    kh, kt = jax.random.split(key)
+    u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(kh, (n,), dtype)) / n
+    rec = _trace(section, wo, 2.0 * u - 1.0, kt, None, 1, "random", False, False)
+    hit = (rec.first_shape >= 0).astype(dtype)
+    m = jnp.mean(hit)
+    return m, jnp.sqrt(m * (1 - m) / max(n - 1, 1)), jnp.mean(rec.truncated.astype(dtype))
+
+
+def masking_fraction(section: Section, wo: Vec3, key, n_paths: int = 2 ** 16):
+    """Fraction of the projected period of a periodic row covered by its shapes, seen from
+    ``wo`` (the barbule weight w'_bb of Padrón 2025 App. B, spec M23): rays are launched
+    uniformly over one period towards -wo and classified by their first hit. Returns
+    ``(fraction, stderr, truncated_fraction)``."""
+    section = section.validate()
+    if not section.periodic:
+        raise ValueError("flatland.masking_fraction needs a periodic row (flatland.ellipse_row)")
+    check_int("flatland.masking_fraction.n_paths", n_paths, 1)
+    if not float(wo.z) > 0:
+        raise ValueError(f"flatland.masking_fraction: wo.z = {float(wo.z)}; the viewer must be "
+                         "above the row (wo.z > 0)")
+    return _masking(section, wo, key, int(n_paths))
