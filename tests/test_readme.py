@@ -75,3 +75,19 @@ def test_cosmetics_example_runs():
     assert np.argmax(f.mean(-1)) == 3  # the dewy highlight at the mirror direction (30 deg)
     f_ad = np.asarray(ns["f_ad"])
     assert f_ad.shape == (5,) and np.all(f_ad > 0)
+
+
+def test_flatland_example_runs():
+    ns: dict = {}
+    exec(compile(_block("flatland.trace_fiber("), "README flatland example", "exec"), ns)
+    w = np.asarray(ns["rec"].weight[:, 0, 0])
+    from appearance_jax.optics.fresnel import fresnel_dielectric
+    f = float(fresnel_dielectric(np.cos(0.3) * np.sqrt(0.75), 1.55)[0])   # spec M18: f = F(cos th cos g_i)
+    np.testing.assert_allclose(w[0], f, rtol=1e-5)
+    assert abs(w[1] - (1 - f) ** 2) < 1e-5 and w.sum() < 1
+    S, v = ns["S"], np.asarray(ns["v"])
+    assert S.S.shape == (4, 45, 90, 3) and np.all(np.isfinite(np.asarray(S.S)))
+    assert v.shape == (4, 3) and np.all(v >= 0) and v[1].max() > 0
+    bow = ns["bow"]
+    ang = np.degrees(np.asarray(bow.scattering_angle)[np.asarray(bow.valid)])
+    np.testing.assert_allclose(ang, 137.630, atol=2e-3)

@@ -81,7 +81,8 @@ def _histogram(section, wi, key, n_chunks, chunk, n_theta, n_phi, n_lobes, max_e
         w = rec.weight                                                  # (E, N, nb)
         D_o = _outer_half_width(section, rec.direction)
         cos_o = jnp.cos(th)
-        ok = cos_o > 1e-6
+        # empty emission slots carry weight 0 and may have a zero direction (D_o = 0)
+        ok = (cos_o > 1e-6) & (D_o > 0)
         sw = jnp.where(ok[..., None], w * (D_i / jnp.where(ok, D_o * cos_o, 1.0))[..., None], 0.0)
         # squares per event: the events of one path fall in different lobes (p grows by at
         # least one between emissions), except in the catch-all last lobe, whose standard

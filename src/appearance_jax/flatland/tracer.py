@@ -108,7 +108,9 @@ def launch(section: Section, wi: Vec3, h):
     # measure-zero set of offsets and keeps gradients finite
     h = jnp.clip(h, -1.0 + 1e-9, 1.0 - 1e-9)
     (y0, z0), (y1, z1) = G.tangent_points(uy, uz, o.cy, o.cz, o.a, o.b, o.psi)
-    far = 10.0 * (jnp.maximum(o.a, o.b) + jnp.abs(o.cy) + jnp.abs(o.cz))
+    # start just outside the shape's bounding circle (not 10 radii away as B.8 suggests): the
+    # origin's magnitude sets the float32 error of the hit, which grazing rays amplify
+    far = 1.001 * jnp.maximum(o.a, o.b) + jnp.abs(o.cy) + jnp.abs(o.cz)
     oy = y0 * (1 - h) * 0.5 + y1 * (1 + h) * 0.5 - far * uy
     oz = z0 * (1 - h) * 0.5 + z1 * (1 + h) * 0.5 - far * uz
     D = G.half_width(uy, uz, o.a, o.b, o.psi)
@@ -126,8 +128,22 @@ def _select_vec(idx, vecs):
     return Vec3(*(_select(idx, [tuple(v)[k] for v in vecs]) for k in range(3)))
 
 
-def _event_uniforms(key, shape, dtype):
-    return tuple(jax.random.uniform(k, shape, dtype) for k in jax.random.split(key, 5))
+def _event_uniforms(key, shape, dtype, needed):
+    """The five uniforms of an event (microfacet 2, choice 1, diffuse 2); slots the section
+    never uses are constants, so a smooth fiber in split mode draws no random numbers."""
+    keys = jax.random.split(key, 5)
+    half = jnp.full(shape, 0.5, dtype)
+    return tuple(jax.random.uniform(k, shape, dtype) if need else half for k, need in zip(keys, needed))
+
+
+def _uniforms_needed(section, mode):
+    rough = any(s.interface.kind == "dielectric" and s.interface.rough for s in section.shapes)
+    diffuse = any(s.interface.kind == "diffuse" for s in section.shapes)
+    # split mode still chooses at interfaces between two interior regions
+    interior = any(s.inside != 0 and s.outside != 0 and s.interface.kind in ("dielectric", "film")
+                   for s in section.shapes)
+    choice = mode != "split" or interior
+    return (rough, rough, choice, diffuse, diffuse)
 
 
 @partial(jax.jit, static_argnames=("max_events", "mode", "wave", "polarized", "nee"))
@@ -326,7 +342,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
 
     def body(carry, key_e):
         f, tf, ist, acc = carry
-        u = _event_uniforms(key_e, (N,), dtype)
+        u = _event_uniforms(key_e, (N,), dtype, needed)
         fn = lambda ff: core(ff, ist, acc["w"], u)
         if wave:
             (f_new, em), (tf_new, tem), aux = jax.jvp(fn, (f,), (tf,), has_aux=True)
@@ -347,6 +363,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
                jnp.where(aux["emit"], foci_emit, 0), aux["E_emit"])
         return (f_new, tf_new, ist_new, acc), rec
 
+    needed = _uniforms_needed(section, mode)
     keys = jax.random.split(key, max_events)
     (f, tf, ist, acc), rec = jax.lax.scan(body, (fstate, tstate, istate, acc), keys)
     direction, weight, lobe, opl, foci, field = rec
