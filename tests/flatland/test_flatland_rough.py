@@ -226,5 +226,9 @@ def test_bad_input_names_the_parameter():
                  polarized=True)
     with pytest.raises(ValueError, match="n_paths"):
         fl.trace_fiber(fl.fiber(1.5), fiber_direction(0.1, 0.0), KEY, 0)
+    with pytest.raises(ValueError, match="wi"):
+        fl.trace(fl.fiber(1.5), Vec3(1.0, 1.0, 0.0), jnp.array([0.0]))
+    with pytest.raises(ValueError, match="mode"):
+        fl.trace_fiber(fl.fiber(1.5), fiber_direction(0.1, 0.0), KEY, 16, mode="both")
     with pytest.raises(ValueError, match="rough interface"):
         fl.nee_bcsdf(fl.fiber(1.5), fiber_direction(0.1, 0.0), fiber_direction(0.1, 1.0), KEY)

@@ -30,7 +30,7 @@ from ..core.quadrature import gauss_legendre
 from ..core.vec import Vec3
 from . import geometry as G
 from .section import Section
-from .tracer import _trace, launch, n_bands
+from .tracer import _trace, check_direction, launch, n_bands
 
 
 class Histogram(NamedTuple):
@@ -120,6 +120,9 @@ def trace_fiber(section: Section, wi: Vec3, key, n_paths: int = 2 ** 16, *, n_th
     Convert with :func:`bcsdf_from_histogram`.
     """
     section = section.validate()
+    check_direction("flatland.trace_fiber.wi", wi)
+    if mode not in ("split", "random"):
+        raise ValueError(f"flatland.trace_fiber: mode = {mode!r}; valid: 'split', 'random'")
     if section.periodic:
         raise ValueError("flatland.trace_fiber: periodic rows have no BCSDF; use "
                          "flatland.masking_fraction or flatland.trace")
@@ -184,6 +187,7 @@ def smooth_lobes(section: Section, wi: Vec3, n_h: int = 256, *, n_lobes: int = 4
     Rough interfaces are rejected: use :func:`trace_fiber`.
     """
     section = section.validate()
+    check_direction("flatland.smooth_lobes.wi", wi)
     for s in section.shapes:
         if s.interface.rough or s.interface.kind == "diffuse":
             raise ValueError("flatland.smooth_lobes needs smooth, non-diffuse interfaces; "
@@ -248,6 +252,8 @@ def nee_bcsdf(section: Section, wi: Vec3, wo: Vec3, key, n_paths: int = 2 ** 14,
     ``(value, stderr)`` of shape (n_lobes, bands).
     """
     section = section.validate()
+    check_direction("flatland.nee_bcsdf.wi", wi)
+    check_direction("flatland.nee_bcsdf.wo", wo)
     if section.periodic:
         raise ValueError("flatland.nee_bcsdf needs a bounded section")
     if not any(s.interface.rough for s in section.shapes):

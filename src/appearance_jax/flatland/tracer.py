@@ -412,6 +412,7 @@ def trace(section: Section, wi: Vec3, h, key=None, *, max_events: int = 16, mode
         parameters (hits are exact; silhouettes and branch switches are not differentiated).
     """
     section = section.validate()
+    check_direction("flatland.trace.wi", wi)
     if mode not in ("split", "random"):
         raise ValueError(f"flatland.trace: mode = {mode!r}; valid: 'split', 'random'")
     if mode == "split" and section.periodic:
@@ -435,6 +436,19 @@ def trace(section: Section, wi: Vec3, h, key=None, *, max_events: int = 16, mode
             *(jnp.broadcast_to(jnp.asarray(c, jnp.complex64 if jnp.result_type(float) == jnp.float32
                                            else jnp.complex128), h.shape) for c in field))
     return _trace(section, wi, h, key, E0, max_events, mode, wave, polarized)
+
+
+def check_direction(label: str, w: Vec3) -> None:
+    """Eager check that a concrete direction is a single finite unit vector."""
+    comps = tuple(w)
+    if any(isinstance(c, jax.core.Tracer) for c in comps):
+        return
+    import numpy as np
+
+    v = np.array([np.asarray(c, float) for c in comps])
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or abs(np.linalg.norm(v) - 1.0) > 1e-4:
+        raise ValueError(f"{label} = {v.tolist()} must be one finite unit vector (|w| = 1), e.g. "
+                         "core.frame.fiber_direction(theta, phi)")
 
 
 def _default_field(wi: Vec3, N):
