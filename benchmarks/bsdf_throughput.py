@@ -20,25 +20,15 @@ printed as well.
 from __future__ import annotations
 
 import argparse
-import glob
 import os
 import platform
-import time
 
 import numpy as np
+from _common import best_time, mitsuba_llvm, sharded_vec3
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
 ALPHA = 0.3
-
-
-def _find_libllvm():
-    for pat in ("/usr/lib/x86_64-linux-gnu/libLLVM-1[6-9]*.so*", "/usr/lib/x86_64-linux-gnu/libLLVM.so.1[6-9]*",
-                "/usr/lib/llvm-1[6-9]/lib/libLLVM*.so*", "/usr/lib/x86_64-linux-gnu/libLLVM-2*.so*"):
-        hits = sorted(glob.glob(pat))
-        if hits:
-            return hits[-1]
-    return None
 
 
 def random_pairs(n, seed=0):
@@ -53,29 +43,13 @@ def random_pairs(n, seed=0):
     return hemi(), hemi()
 
 
-def best_time(fn, repeats):
-    fn()  # warm-up / compile
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return min(ts)
-
-
 def bench_jax(wi_np, wo_np, repeats, n_devices=1):
     import jax
     import jax.numpy as jnp
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
     from appearance_jax.bsdf import rough_conductor as rc
-    from appearance_jax.core.vec import Vec3
 
-    devices = jax.devices()[:n_devices]
-    sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
-    put = lambda c: jax.device_put(jnp.asarray(c), sharding)  # noqa: E731
-    wi = Vec3(*(put(c) for c in wi_np))
-    wo = Vec3(*(put(c) for c in wo_np))
+    wi, wo = sharded_vec3(wi_np, n_devices), sharded_vec3(wo_np, n_devices)
     params = rc.Params(alpha=ALPHA, eta=ETA, k=K, shadowing="separable")
     kernel = rc.eval.kernel  # the jitted public function minus the eager validation
 
@@ -92,17 +66,9 @@ def bench_jax(wi_np, wo_np, repeats, n_devices=1):
 
 
 def bench_mitsuba(wi_np, wo_np, repeats):
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
-        lib = _find_libllvm()
-        if lib:
-            os.environ["DRJIT_LIBLLVM_PATH"] = lib
-    try:
-        import drjit as dr
-        import mitsuba as mi
-
-        mi.set_variant("llvm_ad_rgb")
-    except Exception as e:  # noqa: BLE001 - any failure means "peer unavailable"
-        return None, None, f"unavailable ({type(e).__name__}: {e})"
+    dr, mi = mitsuba_llvm()
+    if dr is None:
+        return None, None, f"{mi}"
     n = wi_np.shape[1]
     bsdf = mi.load_dict({"type": "roughconductor", "distribution": "ggx", "alpha": ALPHA,
                          "eta": {"type": "rgb", "value": list(ETA)}, "k": {"type": "rgb", "value": list(K)},

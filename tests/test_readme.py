@@ -91,3 +91,12 @@ def test_flatland_example_runs():
     bow = ns["bow"]
     ang = np.degrees(np.asarray(bow.scattering_angle)[np.asarray(bow.valid)])
     np.testing.assert_allclose(ang, 137.630, atol=2e-3)
+
+
+def test_hair_example_runs():
+    ns: dict = {}
+    exec(compile(_block("chiang.sample("), "README hair example", "exec"), ns)
+    for k in ("S", "S_m", "S_h"):
+        v = np.asarray(ns[k])
+        assert v.shape == (3,) and np.all(np.isfinite(v)) and np.all(v >= 0) and v.max() > 0, k
+    assert np.all(np.asarray(ns["se"]) >= 0)

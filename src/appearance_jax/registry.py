@@ -25,6 +25,10 @@ _MODULES = (
     "appearance_jax.phase.henyey_greenstein",
     "appearance_jax.phase.hg_mixture",
     "appearance_jax.phase.sggx_flakes",
+    "appearance_jax.bcsdf.chiang",
+    "appearance_jax.bcsdf.marschner",
+    "appearance_jax.bcsdf.sadeghi",
+    "appearance_jax.bcsdf.huang",
 )
 
 # listed sums of lobes: Cook-Torrance specular + diffuse (the classical baseline for fitting

@@ -1,0 +1,61 @@
+"""Helpers shared by the benchmark scripts (run as ``python3 benchmarks/<script>.py``, so this
+directory is on ``sys.path``): timing, sharded inputs, and loading Mitsuba's LLVM backend."""
+
+from __future__ import annotations
+
+import glob
+import os
+import time
+
+import numpy as np
+
+
+def best_time(fn, repeats):
+    """Best wall time of ``repeats`` calls of ``fn`` after one warm-up (compilation) call."""
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return min(ts)
+
+
+def sharded_vec3(rows, n_devices=1):
+    """A Vec3 of the three rows of ``rows`` (3, n), split over the first ``n_devices`` JAX
+    devices along the batch axis (jax.sharding)."""
+    import jax
+    import jax.numpy as jnp
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+    from appearance_jax.core.vec import Vec3
+
+    devices = jax.devices()[:n_devices]
+    sharding = NamedSharding(Mesh(np.array(devices), ("batch",)), PartitionSpec("batch"))
+    return Vec3(*(jax.device_put(jnp.asarray(c), sharding) for c in rows))
+
+
+def _find_libllvm():
+    for pat in ("/usr/lib/x86_64-linux-gnu/libLLVM-1[6-9]*.so*", "/usr/lib/x86_64-linux-gnu/libLLVM.so.1[6-9]*",
+                "/usr/lib/llvm-1[6-9]/lib/libLLVM*.so*", "/usr/lib/x86_64-linux-gnu/libLLVM-2*.so*"):
+        hits = sorted(glob.glob(pat))
+        if hits:
+            return hits[-1]
+    return None
+
+
+def mitsuba_llvm():
+    """``(drjit, mitsuba)`` with the ``llvm_ad_rgb`` variant set, or ``(None, reason)`` when the
+    peer is unavailable (Mitsuba's LLVM backend needs a system libLLVM >= 16)."""
+    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+        lib = _find_libllvm()
+        if lib:
+            os.environ["DRJIT_LIBLLVM_PATH"] = lib
+    try:
+        import drjit as dr
+        import mitsuba as mi
+
+        mi.set_variant("llvm_ad_rgb")
+    except Exception as e:  # noqa: BLE001 - any failure means "peer unavailable"
+        return None, f"unavailable ({type(e).__name__}: {e})"
+    return dr, mi
