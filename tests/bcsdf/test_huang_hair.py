@@ -134,7 +134,8 @@ def test_h9_tilt_law_and_h10_unreachable_forward_direction():
     assert Sf0.max() > 0 and abs(t[np.argmax(Sf0)] + thi) < 0.02
 
 
-@pytest.mark.parametrize("beta,alpha,e,sa", [(0.2, 0.0, 0.0, 0.0), (0.1, 3 * DEG, 0.5, 0.5)])
+@pytest.mark.parametrize("beta,alpha,e,sa", [pytest.param(0.2, 0.0, 0.0, 0.0, marks=pytest.mark.slow),
+                                              (0.1, 3 * DEG, 0.5, 0.5)])
 def test_tt_trt_match_flatland(beta, alpha, e, sa):
     """Spec §4.4: per-lobe S cos th_i of the MC-Simpson estimator vs the flatland NEE reference."""
     # the NEE reference of TRT is heavy-tailed at low roughness: more paths there
