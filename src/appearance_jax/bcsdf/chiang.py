@@ -156,15 +156,10 @@ def longitudinal_lobe(theta_i, theta_o, v):
     return jnp.exp(log_m)
 
 
-def _wrap(x):
-    """x mapped to [-pi, pi]."""
-    return x - 2.0 * jnp.pi * jnp.round(x / (2.0 * jnp.pi))
-
-
 def azimuthal_lobe(dphi, s):
     """Trimmed logistic on [-pi, pi] of scale s, of the wrapped offset ``dphi`` (Chiang Eq. 12);
     int N dphi = 1 over one period."""
-    x = jnp.abs(_wrap(dphi))
+    x = jnp.abs(fiber.wrap_pi(dphi))
     e = jnp.exp(-x / s)
     return e / (s * (1.0 + e) ** 2) / jnp.tanh(jnp.pi / (2.0 * s))
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..core.special import safe_asin, safe_sqrt
+from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric
 
 # Chiang et al. 2016 (as in pbrt-v3): absorption per unit radius of one unit of eumelanin /
@@ -29,6 +30,19 @@ EUMELANIN_RGB = (0.419, 0.697, 1.37)
 PHEOMELANIN_RGB = (0.187, 0.4, 1.05)
 # wavelengths (nm) of the RGB channels in the spectral form (Huang 2022's code)
 RGB_WAVELENGTHS_NM = (612.0, 549.0, 465.0)
+
+
+def wrap_pi(x):
+    """Angle wrapped to [-pi, pi)."""
+    return jnp.mod(x + jnp.pi, 2.0 * jnp.pi) - jnp.pi
+
+
+def meso_normal(n_y, n_z, tilt):
+    """Outward mesonormal of a cuticle tilted by ``tilt`` at the point whose outward in-plane
+    normal is (0, n_y, n_z): (sin tilt, n_y cos tilt, n_z cos tilt) (Eq. 4.39, Huang 2022;
+    tilt > 0 leans it towards the tip, +x)."""
+    c, s = jnp.cos(tilt), jnp.sin(tilt)
+    return Vec3(s * jnp.ones_like(n_y), c * n_y, c * n_z)
 
 
 def bravais_eta(eta, theta):

@@ -73,11 +73,11 @@ from ..core.frame import Frame, fiber_angles, reflect, refract
 from ..core.model import Model, as_bands, boundary
 from ..core.params import integer, param, params_class, static
 from ..core.rng import uniforms
-from ..core.special import safe_acos, safe_atan2, safe_sqrt
+from ..core.special import safe_acos, safe_sqrt
 from ..core.vec import Vec3
 from ..microfacet import distribution as mf
 from ..optics.fresnel import fresnel_dielectric
-from .fiber import half_width, melanin_sigma_a_spectral
+from .fiber import RGB_WAVELENGTHS_NM, half_width, melanin_sigma_a_spectral, meso_normal, wrap_pi
 
 _TINY = 1e-12
 
@@ -114,7 +114,7 @@ class Params:
                 raise ValueError("huang.Params: r_mode='analytic' is the circular closed form (e = 0)")
 
     @classmethod
-    def from_melanin(cls, eumelanin, pheomelanin, wavelength_nm=(612.0, 549.0, 465.0), **kw):
+    def from_melanin(cls, eumelanin, pheomelanin, wavelength_nm=RGB_WAVELENGTHS_NM, **kw):
         """sigma_a from melanin concentrations with Huang's code constants (spec seed-001 §1.3.13;
         :func:`fiber.melanin_sigma_a_spectral`)."""
         return cls(sigma_a=melanin_sigma_a_spectral(eumelanin, pheomelanin, wavelength_nm), **kw)
@@ -148,11 +148,6 @@ def _macro_normal(py, pz, b):
     return ny / r, nz / r
 
 
-def _meso(ny, nz, alpha):
-    c, s = jnp.cos(alpha), jnp.sin(alpha)
-    return Vec3(s * jnp.ones_like(ny), c * ny, c * nz)
-
-
 def _chord(py, pz, d: Vec3, b):
     """Parameter s of the second intersection of p + s (d.y, d.z) with the ellipse (p on it).
     For a unit 3D direction d this is the 3D path length."""
@@ -161,10 +156,6 @@ def _chord(py, pz, d: Vec3, b):
     ok = A > _TINY
     s = jnp.where(ok, -B / jnp.where(ok, A, 1.0), 0.0)
     return jnp.maximum(s, 0.0)
-
-
-def _wrap(x):
-    return jnp.mod(x + jnp.pi, 2.0 * jnp.pi) - jnp.pi
 
 
 def _visible_gamma_interval(theta, phi, alpha, b):
@@ -184,7 +175,7 @@ def _visible_gamma_interval(theta, phi, alpha, b):
 
 def _intersect(lo1, hi1, lo2, hi2):
     m1, m2 = 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
-    shift = _wrap(m2 - m1) - (m2 - m1)
+    shift = wrap_pi(m2 - m1) - (m2 - m1)
     lo2, hi2 = lo2 + shift, hi2 + shift
     lo, hi = jnp.maximum(lo1, lo2), jnp.minimum(hi1, hi2)
     return lo, jnp.maximum(hi, lo)
@@ -248,7 +239,7 @@ def _r_integrand(kind, beta, alpha, eta, b, wi, wo, g):
     py, pz = _point(g, b)
     ny, nz = _macro_normal(py, pz, b)
     n = Vec3(jnp.zeros_like(ny), ny, nz)
-    m = _meso(ny, nz, alpha)
+    m = meso_normal(ny, nz, alpha)
     fr = _local_frame(m)
     il, ol = fr.to_local(wi), fr.to_local(wo)
     h = V.normalize(il + ol)
@@ -303,7 +294,7 @@ def _r_lobe(p: Params, wi: Vec3, wo: Vec3):
         A = jnp.cos(thh) * jnp.cos(alpha) * k
         B = jnp.sin(thh) * jnp.sin(alpha) * k
         mid = 0.5 * (lo + hi)
-        uc = _wrap(phh - mid)
+        uc = wrap_pi(phh - mid)
         u_lo = uc + (mid - lo)     # u at phi_m = lo
         u_hi = uc - (hi - mid)     # u at phi_m = hi
         integral = (_ggx_azimuthal_antiderivative(A, B, beta, u_hi)
@@ -335,7 +326,7 @@ def _tt_trt_terms(p: Params, wi: Vec3, wo: Vec3, g, u1, u2, u3, u4):
     py, pz = _point(g, b)
     ny, nz = _macro_normal(py, pz, b)
     n1 = Vec3(0.0 * ny, ny, nz)
-    m1 = _meso(ny, nz, alpha)
+    m1 = meso_normal(ny, nz, alpha)
     fr1 = _local_frame(m1)
     il = fr1.to_local(wi)
     ok1 = il.z > 0      # macro visibility of w_i: the integration interval
@@ -355,7 +346,7 @@ def _tt_trt_terms(p: Params, wi: Vec3, wo: Vec3, g, u1, u2, u3, u4):
     qy, qz = py + s1 * t.y, pz + s1 * t.z
     my, mz = _macro_normal(qy, qz, b)
     n2_in = Vec3(0.0 * my, -my, -mz)
-    m2_in = -_meso(my, mz, alpha)
+    m2_in = -meso_normal(my, mz, alpha)
     A1 = jnp.exp(-sig * s1[..., None])
     w_back = -t
     tt = (w1 * _exit_pdf(kind, beta, eta, w_back, wo, n2_in, m2_in))[..., None] * A1
@@ -379,7 +370,7 @@ def _tt_trt_terms(p: Params, wi: Vec3, wo: Vec3, g, u1, u2, u3, u4):
     ry, rz = qy + s2 * r.y, qz + s2 * r.z
     ky, kz = _macro_normal(ry, rz, b)
     n3_in = Vec3(0.0 * ky, -ky, -kz)
-    m3_in = -_meso(ky, kz, alpha)
+    m3_in = -meso_normal(ky, kz, alpha)
     A2 = jnp.exp(-sig * s2[..., None])
     trt = (w1 * w2 * _exit_pdf(kind, beta, eta, -r, wo, n3_in, m3_in))[..., None] * A1 * A2
     arc = safe_sqrt(1.0 - (1.0 - b * b) * jnp.sin(g) ** 2)[..., None]

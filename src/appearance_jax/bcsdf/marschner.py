@@ -89,10 +89,10 @@ import jax.numpy as jnp
 from ..core.frame import fiber_angles
 from ..core.model import Model, as_bands, boundary
 from ..core.params import param, params_class, static
-from ..core.special import safe_asin, safe_sqrt
+from ..core.special import safe_sqrt
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_amplitudes
-from .fiber import bravais_eta, bravais_eta_parallel
+from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, wrap_pi
 
 DEG = math.pi / 180.0
 N_BISECT = 60          # bisection steps per monotone piece (2^-60: float64 round-off)
@@ -140,11 +140,6 @@ def gaussian(x, std):
     return jnp.exp(-0.5 * (x / std) ** 2) / (std * math.sqrt(2.0 * math.pi))
 
 
-def wrap_pi(x):
-    """Angle wrapped to [-pi, pi)."""
-    return jnp.remainder(x + jnp.pi, 2.0 * jnp.pi) - jnp.pi
-
-
 def eccentric_eta(eta, axis_ratio, phi_h):
     """eta* of an elliptical fiber (MJC03 §4.3), used for TRT only."""
     a2 = axis_ratio * axis_ratio
@@ -158,9 +153,8 @@ def eccentric_eta(eta, axis_ratio, phi_h):
 # ray optics of a circle
 
 
-def exit_phi(p, h, eta_p):
-    """Phi(p, h) = 2 p gamma_t - 2 gamma_i + p pi (unwrapped)."""
-    return 2.0 * p * safe_asin(h / eta_p) - 2.0 * safe_asin(h) + p * jnp.pi
+# Phi(p, h) = 2 p gamma_t - 2 gamma_i + p pi (unwrapped), the shared fiber convention
+exit_phi = exit_azimuth
 
 
 def exit_phi_slope_scaled(p, h, eta_p):

@@ -90,6 +90,7 @@ from ..core.quadrature import gauss_legendre
 from ..core.special import erf, safe_sqrt
 from ..core.vec import Vec3
 from . import marschner
+from .fiber import exit_azimuth, wrap_pi
 
 DEG = math.pi / 180.0
 HAIR_COLOR = tuple(float(np.exp(-2.0 * s)) for s in (0.2, 0.3, 0.5))
@@ -161,7 +162,7 @@ def gaussian(x, var):
 
 
 def _abs_phi(phi):
-    return jnp.abs(marschner.wrap_pi(phi))
+    return jnp.abs(wrap_pi(phi))
 
 
 def colors(p: Params):
@@ -507,7 +508,7 @@ def afc_from_marschner(mp: marschner.Params, theta_d: float = 0.0, glint_angle=N
     h = jnp.asarray(np.sin(u))
     wh = jnp.asarray(wu * np.cos(u))
     A1 = marschner.attenuation(1, h, mp.eta, td, sa, mp.fresnel, mp.chord)
-    d2 = (marschner.exit_phi(1, h, eta_p) - jnp.pi) ** 2
+    d2 = (exit_azimuth(1, h, eta_p) - jnp.pi) ** 2
     m2 = jnp.sum(wh[:, None] * A1 * d2[:, None], 0) / jnp.sum(wh[:, None] * A1, 0)
     gamma_tt = float(jnp.mean(jnp.sqrt(m2)))
     phi_c, t, glint = marschner.trt_caustic(mp.eta, td, sa, mp.caustic_width, mp.caustic_fade, mp.caustic_limit,

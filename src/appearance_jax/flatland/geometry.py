@@ -23,6 +23,14 @@ from ..core.special import safe_sqrt
 _TWO_PI = 2.0 * jnp.pi
 
 
+def unit_2d(dy, dz):
+    """The section-plane direction (d_y, d_z) normalised; (0, 0) for a direction along the
+    fiber axis (it has no projected motion)."""
+    n2 = jnp.sqrt(dy * dy + dz * dz)
+    inv = jnp.where(n2 > 0, 1.0 / jnp.where(n2 > 0, n2, 1.0), 0.0)
+    return dy * inv, dz * inv
+
+
 def to_local(py, pz, cy, cz, psi):
     """Point in the ellipse's own frame (its first axis along +y)."""
     c, s = jnp.cos(psi), jnp.sin(psi)

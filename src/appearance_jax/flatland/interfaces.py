@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
+from ..bcsdf import fiber
 from ..core import vec as V
 from ..core.frame import Frame, reflect, refract
 from ..core.vec import Vec3
@@ -31,8 +32,7 @@ from ..optics.fresnel import fresnel_amplitudes_complex, fresnel_dielectric
 
 def meso_normal(n_out: Vec3, tilt, from_outside):
     """Mesonormal facing the incident side (Eq. 4.39, Huang 2022; inside: negated)."""
-    c, s = jnp.cos(tilt), jnp.sin(tilt)
-    m = Vec3(s * jnp.ones_like(n_out.y), n_out.y * c, n_out.z * c)
+    m = fiber.meso_normal(n_out.y, n_out.z, tilt)
     return V.where(from_outside, m, -m)
 
 
@@ -43,8 +43,9 @@ def _perp_s(d: Vec3, m: Vec3):
     n = V.norm(s)
     ok = n > 1e-12
     inv = jnp.where(ok, 1.0 / jnp.where(ok, n, 1.0), 0.0)
-    alt = V.normalize(V.cross(Vec3(jnp.ones_like(d.x), jnp.zeros_like(d.x), jnp.zeros_like(d.x)), d)
-                      + Vec3(jnp.zeros_like(d.x), jnp.zeros_like(d.x), jnp.where(jnp.abs(d.x) > 0.999, 1.0, 0.0)))
+    # normal incidence happens only with d close to the section plane (|m.x| = sin(tilt)),
+    # where x cross d is a valid perpendicular
+    alt = V.normalize(V.cross(Vec3(jnp.ones_like(d.x), jnp.zeros_like(d.x), jnp.zeros_like(d.x)), d))
     return V.where(ok, s * inv, alt)
 
 

@@ -23,7 +23,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core import vec as V
 from ..core.frame import fiber_angles
 from ..core.params import check_int
 from ..core.quadrature import gauss_legendre
@@ -51,9 +50,13 @@ class Histogram(NamedTuple):
 
 def _outer_half_width(section: Section, d: Vec3):
     o = section.outer()
-    n2 = jnp.sqrt(d.y * d.y + d.z * d.z)
-    inv = jnp.where(n2 > 0, 1.0 / jnp.where(n2 > 0, n2, 1.0), 0.0)
-    return G.half_width(d.y * inv, d.z * inv, o.a, o.b, o.psi)
+    return G.half_width(*G.unit_2d(d.y, d.z), o.a, o.b, o.psi)
+
+
+def _stratified_offsets(key, n, dtype):
+    """n offsets h in (-1, 1): one jittered sample per stratum of width 2 / n."""
+    u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(key, (n,), dtype)) / n
+    return 2.0 * u - 1.0
 
 
 @partial(jax.jit, static_argnames=("n_chunks", "chunk", "n_theta", "n_phi", "n_lobes", "max_events",
@@ -69,10 +72,7 @@ def _histogram(section, wi, key, n_chunks, chunk, n_theta, n_phi, n_lobes, max_e
 
     def one(carry, k):
         kh, kt = jax.random.split(k)
-        # stratified offsets: one jittered sample per stratum of [-1, 1]
-        u = (jnp.arange(chunk, dtype=dtype) + jax.random.uniform(kh, (chunk,), dtype)) / chunk
-        h = 2.0 * u - 1.0
-        rec = _trace(section, wi, h, kt, None, max_events, mode, False, False)
+        rec = _trace(section, wi, _stratified_offsets(kh, chunk, dtype), kt, None, max_events, mode, False, False)
         th, ph = fiber_angles(rec.direction)
         it = jnp.clip(jnp.floor((th + jnp.pi / 2) / jnp.pi * n_theta).astype(jnp.int32), 0, n_theta - 1)
         ip = jnp.clip(jnp.floor((ph + jnp.pi) / (2 * jnp.pi) * n_phi).astype(jnp.int32), 0, n_phi - 1)
@@ -221,8 +221,8 @@ def _nee(section, wi, wo, key, n_chunks, chunk, n_lobes, max_events):
 
     def one(carry, k):
         kh, kt = jax.random.split(k)
-        u = (jnp.arange(chunk, dtype=dtype) + jax.random.uniform(kh, (chunk,), dtype)) / chunk
-        rec = _trace(section, wo, 2.0 * u - 1.0, kt, None, max_events, "random", False, False, True, wi)
+        rec = _trace(section, wo, _stratified_offsets(kh, chunk, dtype), kt, None, max_events, "random", False,
+                     False, True, wi)
         lobe = jnp.clip(rec.lobe, 0, n_lobes - 1)
         path = jnp.broadcast_to(jnp.arange(chunk), lobe.shape)
         per = jax.ops.segment_sum(rec.weight.reshape(-1, nb), (lobe * chunk + path).reshape(-1),
@@ -269,8 +269,7 @@ def nee_bcsdf(section: Section, wi: Vec3, wo: Vec3, key, n_paths: int = 2 ** 14,
 def _masking(section, wo, key, n):
     dtype = jnp.result_type(float)
     kh, kt = jax.random.split(key)
-    u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(kh, (n,), dtype)) / n
-    rec = _trace(section, wo, 2.0 * u - 1.0, kt, None, 1, "random", False, False)
+    rec = _trace(section, wo, _stratified_offsets(kh, n, dtype), kt, None, 1, "random", False, False)
     hit = (rec.first_shape >= 0).astype(dtype)
     m = jnp.mean(hit)
     return m, jnp.sqrt(m * (1 - m) / max(n - 1, 1)), jnp.mean(rec.truncated.astype(dtype))

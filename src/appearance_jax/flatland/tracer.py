@@ -91,13 +91,9 @@ def launch(section: Section, wi: Vec3, h):
     weights fixed to (1 - h)/2, (1 + h)/2, seed-000 spec M22). Rows: ``h`` in [-1, 1) spans
     one period on the line z = top of the row; rays must come from z > 0.
     """
-    dy, dz = -wi.y, -wi.z
-    n2 = jnp.sqrt(dy * dy + dz * dz)
-    inv = jnp.where(n2 > 0, 1.0 / jnp.where(n2 > 0, n2, 1.0), 0.0)
-    uy, uz = dy * inv, dz * inv
+    uy, uz = G.unit_2d(-wi.y, -wi.z)
     if section.periodic:
-        s = section.shapes
-        top = max(jnp.abs(x.cz) + jnp.maximum(x.a, x.b) for x in s) * 1.0001
+        top = _row_reach(section) * 1.0001
         P = section.period
         oy = (h + 1.0) * 0.5 * P
         oz = jnp.broadcast_to(top, jnp.shape(oy))
@@ -382,10 +378,15 @@ def _crossing(f, tf, length, mask):
     return (mask & ok & (s > 0) & (s < length)).astype(jnp.int32)
 
 
+def _row_reach(section):
+    """Half height of the band |z| <= reach that holds every shape of a periodic row."""
+    return max(jnp.abs(s.cz) + jnp.maximum(s.a, s.b) for s in section.shapes)
+
+
 def _truncated(section, p_y, p_z, d, alive, region):
     """Periodic rows: True where a ray crossing the row's band could reach shapes beyond the
     ``copies`` neighbours tested per event."""
-    reach = max(jnp.abs(s.cz) + jnp.maximum(s.a, s.b) for s in section.shapes)
+    reach = _row_reach(section)
     dz = jnp.where(jnp.abs(d.z) > 1e-12, jnp.abs(d.z), 1e-12)
     span = (2.0 * reach * jnp.abs(d.y) / dz + 2.0 * reach) / section.period
     return alive & (span > section.copies)
