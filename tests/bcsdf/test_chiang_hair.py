@@ -120,6 +120,30 @@ def test_tilt_shifts_lobes():
     assert np.allclose(peaks, [2 * a - ti, -a - ti, -4 * a - ti, -ti], atol=1e-3)
 
 
+def test_direction_kernel_equals_angle_formulas():
+    """The eval kernel works from direction components (angle addition for the tilt, a squared
+    chord for sin^2((ti + to)/2), one atan2): its M_p and N_p equal the angle-form lobe functions
+    at random directions, including tilts that fold theta_i + a past +-pi/2 and narrow lobes."""
+    rng = np.random.default_rng(3)
+    n = 4000
+    ti, to = rng.uniform(-1.55, 1.55, n), rng.uniform(-1.55, 1.55, n)
+    ti[:20] = np.linspace(1.45, 1.5707, 20)  # R/TRT tilt folds back past pi/2
+    pi_, po = rng.uniform(-np.pi, np.pi, n), rng.uniform(-np.pi, np.pi, n)
+    h = rng.uniform(-1, 1, n)
+    for beta_m, alpha in ((0.3, 0.2), (0.03, -0.3), (0.9, 0.0)):
+        p = chiang.Params(beta_m=beta_m, beta_n=0.25, alpha=alpha)
+        A, M, N = (np.asarray(a) for a in chiang.lobes(p, _dirs(ti, pi_), _dirs(to, po), h=h))
+        v = np.asarray(jnp.stack(chiang.longitudinal_variances(beta_m)))[:, None]
+        M_ref = np.asarray(chiang.longitudinal_lobe(chiang.tilted_angles(jnp.asarray(ti), alpha), to[None], v))
+        assert np.allclose(M, M_ref, rtol=1e-9, atol=1e-12 * M_ref.max())
+        eta_p = fiber.bravais_eta(1.55, ti)
+        s = chiang.azimuthal_scale(0.25)
+        N_ref = [chiang.azimuthal_lobe(po - pi_ - fiber.exit_azimuth(k, h, eta_p), s) for k in range(3)]
+        assert np.allclose(N[:3], np.asarray(N_ref), rtol=1e-9, atol=1e-12)
+        assert np.allclose(A, np.asarray(fiber.smooth_attenuation(h, ti, 1.55, chiang.as_bands(p.sigma_a), 3)),
+                           rtol=1e-12)
+
+
 # ------------------------------------------------------------------------------------------
 # energy
 

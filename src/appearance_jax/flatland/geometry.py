@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..core.special import safe_sqrt
+from ..core.special import atan2, safe_sqrt
 
 _TWO_PI = 2.0 * jnp.pi
 
@@ -84,7 +84,7 @@ def intersect(py, pz, dy, dz, cy, cz, a, b, psi, lo, span, leaving):
 
     def on_arc(t):
         y, z = qy + t * ey, qz + t * ez
-        g = jnp.arctan2(z / b, y / a)
+        g = atan2(z / b, y / a)
         return jnp.mod(g - lo, _TWO_PI) <= span
 
     inf = jnp.inf
@@ -105,7 +105,7 @@ def normal_at(py, pz, cy, cz, a, b, psi):
 def parametric_angle(py, pz, cy, cz, a, b, psi):
     """Parametric angle gamma of a point on the ellipse (B.5)."""
     qy, qz = to_local(py, pz, cy, cz, psi)
-    return jnp.arctan2(qz / b, qy / a)
+    return atan2(qz / b, qy / a)
 
 
 def tangent_points(uy, uz, cy, cz, a, b, psi):
@@ -118,7 +118,7 @@ def tangent_points(uy, uz, cy, cz, a, b, psi):
     gamma_i = asin h (pbrt, d'Eon 2011; spec M18).
     """
     ey, ez = dir_to_local(uy, uz, psi)
-    g = jnp.arctan2(-b * ey, a * ez)  # tangent where the normal is perpendicular to e
+    g = atan2(-b * ey, a * ez)  # tangent where the normal is perpendicular to e
     pts = []
     for gg in (g, g + jnp.pi):
         ly, lz = a * jnp.cos(gg), b * jnp.sin(gg)

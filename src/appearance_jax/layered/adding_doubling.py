@@ -112,6 +112,7 @@ import numpy as np
 from ..core.linalg import solve_diagonally_dominant
 from ..core.params import ParamSpec, check_int, check_value
 from ..core.quadrature import gauss_legendre
+from ..core.special import atan2
 from ..core.vec import Vec3
 
 DEFAULT_NODES = 24
@@ -434,7 +435,7 @@ def brdf(layers, bottom_albedo, wi: Vec3, wo: Vec3, *, n_nodes: int = DEFAULT_NO
     either cosine is <= 0. Cost: see the module docstring ("Query angles").
     """
     P, rho, banded = _prepare(layers, bottom_albedo, n_nodes, n_fourier, n_doublings)
-    dphi = jnp.arctan2(wo.y, wo.x) - jnp.arctan2(wi.y, wi.x)
+    dphi = atan2(wo.y, wo.x) - atan2(wi.y, wi.x)
     return _brdf(P, rho, jnp.asarray(wi.z), jnp.asarray(wo.z), dphi, banded, n_nodes, n_fourier, n_doublings)
 
 
