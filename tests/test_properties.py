@@ -94,6 +94,15 @@ GRID: dict[str, list[Case]] = {
     # with common random numbers vs finite differences) are in tests/bsdf/test_cosmetics.py and
     # tests/mc/test_layered_walk.py
     "cosmetics": [Case("dewy1", dict(preset="dewy1"))],
+    # Sadeghi's cloth (BRDF form, not reciprocal: cos theta_i(t) / N.w_i; tests/bsdf/test_cloth.py checks
+    # f_s, M and P). T = 4 tangent samples keep it cheap (presets: SLOW_GRID); the default energy gate
+    # incident_cosine="patch" keeps the albedo <= 1 at grazing incidence (the thesis' formula does not)
+    "cloth": [
+        Case("random_T4", dict(eta=1.4, albedo=((0.5, 0.2, 0.1), (0.1, 0.3, 0.6)), k_d=(0.2, 0.6),
+                               gamma_s=(8.0, 15.0), gamma_v=(16.0, 30.0), coverage=(0.6, 0.4),
+                               offsets=((-20.0, -20.0, 20.0, 20.0), (-10.0, 10.0, 10.0, 10.0)),
+                               lengths=((1.0, 1.0, 1.0), (1.0, 0.0, 0.0)), rotation=30.0, n_samples=4)),
+    ],
     # hair (fiber frame; the albedo is int S cos(theta_o) dwo). Chiang: energy conserving (white
     # hair has albedo 1), not reciprocal (A_p and the tilt depend on theta_i, N_p on h)
     "chiang_hair": [
@@ -169,6 +178,12 @@ SLOW_GRID: dict[str, list[Case]] = {
                     for a in (1.0, 0.5, 0.3) for t in (0.0, 0.6, 1.4)]
     + [Case(name, dict(preset=name), lossless=True, opts=_FINE) for name in ("dewy1", "matte1")],
     "cosmetics": [Case(name, dict(preset=name)) for name in ("dewy2", "matte1", "matte2")],
+    "cloth": [Case(name, dict(importlib.import_module("appearance_jax.bsdf.cloth_presets").kwargs(name),
+                              n_samples=16), opts=_FINE)
+              for name in ("linen_plain", "silk_crepe_de_chine", "silk_shot", "polyester_satin_back", "velvet")]
+    + [Case("literal_full_eq58", dict(importlib.import_module("appearance_jax.bsdf.cloth_presets").kwargs("linen_plain"),
+                                      n_samples=16, theta_d="full", volume_fresnel="eq58"),
+            opts={"skip": ("furnace",)})],
     "chiang_hair": [
         Case("brown", dict()),
         Case("far_black", dict(sigma_a=(3.35, 5.58, 10.96), beta_m=0.6, beta_n=0.8, far_field=True, n_h=8)),

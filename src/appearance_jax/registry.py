@@ -22,6 +22,7 @@ _MODULES = (
     "appearance_jax.bsdf.iridescent",
     "appearance_jax.bsdf.snake",
     "appearance_jax.bsdf.cosmetics",
+    "appearance_jax.bsdf.cloth",
     "appearance_jax.phase.henyey_greenstein",
     "appearance_jax.phase.hg_mixture",
     "appearance_jax.phase.sggx_flakes",

@@ -1,0 +1,422 @@
+"""Sadeghi's practical cloth model: a weave of thread families scattered by the thread BCSDF,
+with tangent curves, masking/shadowing and reweighting (Sadeghi 2011 Ch. 5, Eqs. 5.12-5.20,
+App. E; Sadeghi et al. 2013, "A practical microcylinder appearance model for cloth
+rendering", ACM TOG 32(2)). Spec seed-002 §1.4.
+
+The smallest repeating patch of the weave holds J thread families (J = 2 in the thesis: "the
+formulations ... can be trivially extended to any number of threads", L2394). Family j runs
+along u_j = (cos b_j, sin b_j, 0), b_j = ``rotation`` + ``family_angle[j]`` (family 1 along the
+surface tangent x, family 2 along y = N x x), covers the fraction ``coverage[j]`` = a_j of the
+patch, and has a tangent curve (``offsets``, ``lengths``; :mod:`.weave`) sampled at T =
+``n_samples`` points C_j. Each tangent sample t(alpha) = cos(alpha) u_j + sin(alpha) N with
+local normal n(alpha) = -sin(alpha) u_j + cos(alpha) N and v_j = N x u_j scatters with the thread
+BCSDF f_s of :mod:`appearance_jax.bcsdf.thread` (Eq. 5.11) with family j's parameters, is
+masked by M(t) (Eqs. 5.14-5.16) and reweighted by its projected length P(t) (Eqs. 5.18-5.19):
+
+    R(w_i, w_r) = sum_j a_j [sum_{t in C_j} f_s(t, w_i, w_r) M(t) P(t) cos theta_i(t)] / sum_{k in C} P(k)   (5.12, 5.20)
+
+with C = C_1 u ... u C_J (J T samples) and cos theta_i(t) = sqrt(1 - (w_i.t)^2) the *thread*
+(curve-irradiance) cosine of Eq. 5.6.
+
+**Output convention (decision D-C4).** The thesis writes L_r(w_r) = int L_i(w_i) R(w_i, w_r)
+dw_i (Eq. 5.20): R is a *radiance response* per unit solid angle of incident light, with no
+N.w_i; it is :func:`radiance_response`. A measured BRDF is defined by
+L_r = int f L_i (N.w_i) dw_i, so the BRDF of the model is
+
+    f(w_i, w_r) = R(w_i, w_r) / (N . w_i)                           (1/sr)
+
+and that is what :func:`eval` returns (and what :mod:`appearance_jax.fit` fits against
+gonioreflectometer and MERL tables, which are BRDFs). ``f cos theta_o`` is then the
+integrand of the albedo. Neither form is reciprocal (cos theta_i(t) / (N.w_i) is
+asymmetric), although f_s, M and P each are: ``MODEL.reciprocal = False``.
+
+**Energy (this library's decision; not in the thesis).** Taken literally, the albedo
+a(w_i) = int f cos theta_o dw_o is not bounded by 1 near grazing incidence: tangents that stand
+out of the surface plane (velvet's -90..-50 deg, or any offset alpha != 0 facing the light)
+intercept max(n(alpha).w_i, 0) = M(t, w_i) cos theta_i(t) > 0 while N.w_i -> 0, so f ~ 1/(N.w_i)
+(the thesis' P reweights tangents against each other and is normalised away by sum P, and
+there is no shadowing between tilted samples). The default ``incident_cosine="patch"`` gates
+the response by min(1, N.w_i / E), E the weave's average intercepted light per unit area
+(same weights as Eq. 5.20; :func:`_patch_gate`): a flat patch cannot intercept more than
+N.w_i. Flat tangents (alpha = 0) intercept exactly N.w_i, so the gate only acts on tilted ones
+facing a grazing light; below ~75 deg incidence it is 1 for every preset.
+``incident_cosine="thread"`` is the thesis' formula. Measured albedo maximum over R, G, B
+(T = 32, 128 x 256 quadrature, light azimuth 45 deg from family 1), "thread" / "patch":
+
+| preset                | 0 deg         | 60 deg        | 75 deg        | 85 deg        | 89 deg        |
+|-----------------------|---------------|---------------|---------------|---------------|---------------|
+| linen_plain           | 0.136 / 0.136 | 0.180 / 0.180 | 0.262 / 0.262 | 0.598 / 0.598 | 2.57 / 0.655  |
+| silk_crepe_de_chine   | 0.086 / 0.086 | 0.157 / 0.157 | 0.291 / 0.288 | 0.963 / 0.401 | 6.15 / 0.469  |
+| polyester_satin_front | 0.090 / 0.090 | 0.127 / 0.127 | 0.198 / 0.198 | 0.592 / 0.346 | 4.24 / 0.376  |
+| polyester_satin_back  | 0.103 / 0.103 | 0.148 / 0.148 | 0.211 / 0.211 | 0.529 / 0.340 | 3.37 / 0.373  |
+| silk_shot             | 0.143 / 0.143 | 0.204 / 0.204 | 0.364 / 0.364 | 1.167 / 0.632 | 7.62 / 0.716  |
+| velvet                | 0.001 / 0.001 | 0.031 / 0.031 | 0.104 / 0.075 | 0.418 / 0.108 | 2.33 / 0.124  |
+
+tests/bsdf/test_cloth.py::test_energy_bound asserts both statements.
+
+Other decisions (spec §6): D-C1 ``theta_d`` and D-C2 ``volume_fresnel`` as in
+:mod:`~appearance_jax.bcsdf.thread`; D-C3 gammas in degrees at this boundary; D-C5
+``masking_width`` = 20 deg; D-C6 ``tangent_sign`` +1 (t = cos a u + sin a N) or -1;
+D-C8 velvet gamma_s 6 deg (:func:`velvet`); D-C9 T = ``n_samples`` = 64 (midpoint samples).
+``normalization="all"`` is Eq. 5.20 (divide by the sum of P over all J T tangents: with P = 1
+each family is weighted a_j / J); ``"per_family"`` divides family j by the sum over C_j only
+(a coverage-weighted mean; not in the thesis). ``masking``/``reweighting`` = False set
+M = 1 / P = 1 (Eqs. 5.17 and 5.13).
+
+Family parameters are arrays with the family axis last (bands after it for ``albedo``):
+
+| parameter     | default              | range       | unit | meaning                                           |
+|---------------|----------------------|-------------|------|---------------------------------------------------|
+| eta           | 1.46                 | [1, 3]      | 1    | refractive index of the threads                   |
+| albedo        | (J, bands) 0.3       | [0, 1]      | 1    | A per family and band (Eq. 5.9)                   |
+| k_d           | (J,) 0.3             | [0, 1]      | 1    | isotropic volume fraction per family              |
+| gamma_s       | (J,) 12              | (0, 90]     | deg  | surface Gaussian std per family (Eq. 5.7)         |
+| gamma_v       | (J,) 24              | (0, 90]     | deg  | volume Gaussian std per family (Eq. 5.9)          |
+| coverage      | (J,) 0.5             | [0, 1]      | 1    | a_j, area fraction per family (Eq. 5.12)          |
+| offsets       | (J, K) {-25, 25}     | [-90, 90]   | deg  | tangent-curve offsets (App. E)                    |
+| lengths       | (J, K-1) {1}         | [0, inf)    | 1    | tangent-curve segment lengths (0 = jump)          |
+| family_angle  | (J,) (0, 90)         | [-360, 360] | deg  | direction of family j in the surface plane        |
+| rotation      | 0                    | [-360, 360] | deg  | rotation of the whole weave about N               |
+| masking_width | 20                   | (0, 90]     | deg  | std of u(.) in Eqs. 5.16, 5.19 (D-C5)             |
+| n_samples     | 64                   | [1, 1024]   | -    | T, samples per tangent curve (D-C9)               |
+| theta_d, volume_fresnel | "half", "longitudinal" | | -  | D-C1, D-C2                                        |
+| tangent_sign  | 1                    | 1, -1       | -    | D-C6                                              |
+| masking, reweighting | True, True    |             | -    | M and P on/off                                    |
+| normalization | "all"                | all, per_family | - | denominator of Eq. 5.20                        |
+| n_rotations   | 1                    | [1, 64]     | -    | average over K weave rotations (isotropic samples)|
+| incident_cosine | "patch"            | patch, thread | -  | energy gate (above) or the thesis' formula        |
+
+Presets (``PRESETS``, :mod:`.cloth_presets`, with the OCR repairs documented there):
+``linen_plain``, ``silk_crepe_de_chine``, ``polyester_satin_front``, ``polyester_satin_back``,
+``silk_shot``, ``velvet``. The two imaginary fabrics of Fig. 5.32 (Shantung; asymmetric
+specular peaks) have no parameters in the thesis and are not presets.
+
+Sampling: with probability P_D = 0.2 a cosine-weighted direction about N (covers k_d and the
+tails); else a tangent sample (j, k) is chosen with probability
+w_jk proportional to a_j (cos theta_i(t) M(t, w_i) P(t, w_i) + 0.1), one of the two Gaussians
+(gamma_s or gamma_v, probability 1/2 each) gives theta_h ~ N(0, gamma), theta_r = 2 theta_h -
+theta_i(t) (so theta_r ~ N(-theta_i, 2 gamma): the specular cone), and phi_r ~ U(-pi/2, pi/2)
+about n(alpha) (the front half; M = 0 behind). |theta_r| >= pi/2 or w_o below the horizon is a
+failed sample (weight 0, pdf 0). ``pdf`` is the exact density of this procedure: the mixture
+over all J T tangents, p(w) = P_D cos theta_o / pi + (1 - P_D) sum_jk w_jk
+[g(2 gamma_s, theta_r + theta_i) + g(2 gamma_v, theta_r + theta_i)] / 2 [w.n > 0] / (pi cos theta_r).
+
+Example::
+
+    from appearance_jax.bsdf import cloth
+    from appearance_jax.core.frame import in_plane_directions
+    p = cloth.PRESETS["polyester_satin_front"]
+    wi, wo = in_plane_directions(0.0, jnp.linspace(-1.4, 1.4, 57))   # the plane through u (family 1)
+    f = cloth.eval(p, wi, wo)                                        # (57, 3) BRDF, 1/sr
+    r = cloth.radiance_response(p, wi, wo)                           # = f * cos(theta_i)
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..bcsdf import thread
+from ..core import warp
+from ..core.model import Model, boundary, with_bands
+from ..core.params import integer, param, params_class, static
+from ..core.rng import uniforms
+from ..core.special import erfinv, safe_asin, safe_sqrt
+from ..core.vec import Vec3
+from . import cloth_presets, weave
+
+DEG = math.pi / 180.0
+P_DIFFUSE = 0.2  # probability of the cosine-weighted lobe in the sampler
+TANGENT_FLOOR = 0.1  # keeps every tangent's selection weight positive
+
+
+def _width(v):
+    v = float(v)
+    if not (0.0 < v <= 90.0):
+        raise ValueError("must be in (0, 90] degrees")
+    return v
+
+
+@params_class
+class Params:
+    eta: object = param(1.46, lo=1.0, hi=3.0, doc="refractive index of the threads")
+    albedo: object = param(((0.3, 0.3, 0.3), (0.3, 0.3, 0.3)), lo=0.0, hi=1.0,
+                           doc="A per family (rows) and band (last axis)", bands=True)
+    k_d: object = param((0.3, 0.3), lo=0.0, hi=1.0, doc="isotropic volume fraction per family")
+    gamma_s: object = param((12.0, 12.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
+                            doc="surface Gaussian std per family")
+    gamma_v: object = param((24.0, 24.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
+                            doc="volume Gaussian std per family")
+    coverage: object = param((0.5, 0.5), lo=0.0, hi=1.0, doc="area coverage a_j per family")
+    offsets: object = param(((-25.0, 25.0), (-25.0, 25.0)), lo=-90.0, hi=90.0, unit="deg",
+                            doc="tangent-curve offsets per family (rows)")
+    lengths: object = param(((1.0,), (1.0,)), lo=0.0, doc="tangent-curve segment lengths per family (0 = jump)")
+    family_angle: object = param((0.0, 90.0), lo=-360.0, hi=360.0, unit="deg",
+                                 doc="direction of each family in the surface plane")
+    rotation: object = param(0.0, lo=-360.0, hi=360.0, unit="deg", doc="rotation of the weave about the normal")
+    masking_width: float = static(20.0, convert=_width, doc="std (deg) of u() in Eqs. 5.16, 5.19 (D-C5)")
+    n_samples: int = static(64, convert=integer(1, 1024), doc="T, samples per tangent curve (D-C9)")
+    theta_d: str = static("half", choices=thread.THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d")
+    volume_fresnel: str = static("longitudinal", choices=thread.VOLUME_FRESNEL, doc="D-C2: volume Fresnel")
+    tangent_sign: int = static(1, choices=(1, -1), doc="D-C6: t = cos a u + sign sin a N")
+    masking: bool = static(True, choices=(True, False), doc="masking/shadowing M (Eqs. 5.14-5.16)")
+    reweighting: bool = static(True, choices=(True, False), doc="reweighting P (Eqs. 5.18-5.19)")
+    normalization: str = static("all", choices=("all", "per_family"), doc="denominator of Eq. 5.20")
+    n_rotations: int = static(1, convert=integer(1, 64),
+                              doc="average over this many weave rotations 360 k / K deg (1 = off)")
+    incident_cosine: str = static("patch", choices=("patch", "thread"),
+                                  doc="thread cosine gated by the patch's irradiance (default) or as in the thesis")
+
+    def _validate(self):
+        label = "cloth.Params"
+        j = np.shape(self.coverage)[-1]
+        for name in ("k_d", "gamma_s", "gamma_v", "family_angle"):
+            if np.shape(getattr(self, name))[-1:] != (j,):
+                raise ValueError(f"{label}.{name} has shape {np.shape(getattr(self, name))}: its last axis must be "
+                                 f"the {j} families of coverage")
+        if np.ndim(self.albedo) < 2 or np.shape(self.albedo)[-2] != j:
+            raise ValueError(f"{label}.albedo has shape {np.shape(self.albedo)}: expected (..., {j}, bands)")
+        o, ln = np.shape(self.offsets), np.shape(self.lengths)
+        if len(o) < 2 or o[-2] != j or o[-1] < 2 or ln[-2:] != (j, o[-1] - 1):
+            raise ValueError(f"{label}.offsets {o} / lengths {ln}: expected (..., {j}, K >= 2) / (..., {j}, K - 1)")
+        total = np.sum(np.asarray(self.lengths), axis=-1)
+        if np.any(total <= 0):
+            raise ValueError(f"{label}.lengths: total length {float(np.min(total)):g} of a tangent curve must be > 0")
+
+
+# ----------------------------------------------------------------------------------------
+# geometry of the tangent samples
+
+
+def _family(p: Params):
+    """Per-sample arrays, shape (..., J, T): alpha (rad); per family (..., J, 1): cos/sin b."""
+    alpha = weave.sample_curve(p.offsets, p.lengths, p.n_samples) * (DEG * p.tangent_sign)
+    b = (p.rotation[..., None] + p.family_angle) * DEG
+    return alpha, jnp.cos(b)[..., None], jnp.sin(b)[..., None]
+
+
+def _components(w: Vec3, alpha, cb, sb):
+    """(w.t, w.n, w.v) per tangent sample; w's components get two trailing axes (J, T)."""
+    x, y, z = (jnp.asarray(c)[..., None, None] for c in w)
+    wu = x * cb + y * sb
+    wv = -x * sb + y * cb
+    ca, sa = jnp.cos(alpha), jnp.sin(alpha)
+    return ca * wu + sa * z, -sa * wu + ca * z, wv
+
+
+def _fam(x):
+    """A per-family array (..., J) -> (..., J, 1) to broadcast over the T samples."""
+    return jnp.asarray(x)[..., None]
+
+
+def _patch_gate(p: Params, in_, P, den, wi_z):
+    """min(1, N.w_i / E): the share of the weave's intercepted light that the patch can receive
+    (``incident_cosine="patch"``; not in the thesis, see the module docstring).
+
+    M(t, w_i) cos theta_i(t) = max(n(alpha).w_i, 0) is the light a tangent sample intercepts per
+    unit area of its own (tilted) element; E is its average over the weave with the weights of
+    Eq. 5.20 (coverage a_j, reweighting P, the same denominator). A flat patch can intercept no
+    more than N.w_i per unit area, so where E > N.w_i (tilted tangents facing a grazing light,
+    which a real weave shadows) every sample is scaled down by N.w_i / E. For alpha = 0,
+    max(n.w_i, 0) = N.w_i and the gate is 1: only tilted tangents can trigger it.
+    """
+    e = jnp.sum(jnp.maximum(in_, 0.0) * P, axis=-1, keepdims=True)  # (..., J, 1), like num
+    ok_den = den > 0
+    e = jnp.sum(_fam(p.coverage) * jnp.where(ok_den, e / jnp.where(ok_den, den, 1.0), 0.0), axis=(-2, -1))
+    ok = e > wi_z
+    return jnp.where(ok, wi_z / jnp.where(ok, e, 1.0), 1.0)
+
+
+def _response(p: Params, wi: Vec3, wo: Vec3):
+    """R(w_i, w_r) of Eq. 5.20 (bands last), 0 where either direction is at/below the horizon."""
+    alpha, cb, sb = _family(p)
+    it, in_, iv = _components(wi, alpha, cb, sb)
+    ot, on, ov = _components(wo, alpha, cb, sb)
+    fs = thread.from_dots(p, it, in_, iv, ot, on, ov, eta=jnp.asarray(p.eta)[..., None, None],
+                          albedo=jnp.asarray(p.albedo)[..., :, None, :], k_d=_fam(p.k_d),
+                          gamma_s=_fam(p.gamma_s) * DEG, gamma_v=_fam(p.gamma_v) * DEG)
+    width = p.masking_width * DEG
+    M = weave.masking(in_, iv, on, ov, width) if p.masking else jnp.ones_like(it)
+    P = weave.reweighting(it, in_, ot, on, width) if p.reweighting else jnp.ones_like(it)
+    w = M * P * safe_sqrt(1.0 - it * it)  # cos theta_i(t): the thread (curve-irradiance) cosine
+    num = jnp.sum(fs * w[..., None], axis=-2)  # (..., J, bands)
+    if p.normalization == "all":
+        den = jnp.sum(P, axis=(-2, -1))[..., None, None]
+    else:
+        den = jnp.sum(P, axis=-1)[..., None]
+    ok_den = den > 0
+    fam = jnp.where(ok_den, num / jnp.where(ok_den, den, 1.0), 0.0)
+    r = jnp.sum(_fam(p.coverage) * fam, axis=-2)
+    if p.incident_cosine == "patch":
+        r = r * _patch_gate(p, in_, P, den, wi.z)[..., None]
+    ok = (wi.z > 0) & (wo.z > 0)
+    return jnp.where(with_bands(ok), r, 0.0)
+
+
+def _rotate_z(w: Vec3, c, s):
+    """w rotated by the angle (c = cos, s = sin) about the normal z."""
+    return Vec3(c * w.x - s * w.y, s * w.x + c * w.y, w.z * jnp.ones_like(c))
+
+
+def _rotation_average(fn, p: Params, wi: Vec3, wo: Vec3):
+    """fn averaged over the weave rotated by 360 k / K deg, k < K = ``n_rotations`` (rotating
+    the weave by b is rotating both directions by -b): the model of a sample whose weave
+    orientation varies over the measured area, or an isotropic measurement such as MERL's."""
+    K = p.n_rotations
+    if K == 1:
+        return fn(p, wi, wo)
+    b = -2.0 * jnp.pi * jnp.arange(K) / K
+    c, s = (v.reshape((K,) + (1,) * len(jnp.broadcast_shapes(wi.shape, wo.shape))) for v in (jnp.cos(b), jnp.sin(b)))
+    return jnp.mean(fn(p, _rotate_z(wi, c, s), _rotate_z(wo, c, s)), axis=0)
+
+
+def _brdf(p: Params, wi: Vec3, wo: Vec3):
+    r = _response(p, wi, wo)
+    ok = wi.z > 0
+    return r / with_bands(jnp.where(ok, wi.z, 1.0))
+
+
+def _eval(p: Params, wi: Vec3, wo: Vec3):
+    return _rotation_average(_brdf, p, wi, wo)
+
+
+def _radiance_response(p: Params, wi: Vec3, wo: Vec3):
+    return _rotation_average(_response, p, wi, wo)
+
+
+# ----------------------------------------------------------------------------------------
+# sampling
+
+
+def _tangent_weights(p: Params, wi: Vec3):
+    """Selection probabilities w_jk of the tangent samples (..., J, T) and the geometry."""
+    alpha, cb, sb = _family(p)
+    it, in_, iv = _components(wi, alpha, cb, sb)
+    Mi, Pi = weave.single(it, in_, iv)
+    w = _fam(p.coverage) * (safe_sqrt(1.0 - it * it) * Mi * Pi + TANGENT_FLOOR)
+    w = w / jnp.sum(w, axis=(-2, -1), keepdims=True)
+    return w, alpha, cb, sb, it
+
+
+def _gauss(sigma, x):
+    return thread.gaussian(sigma, x)
+
+
+def _lobe_density(p: Params, wi: Vec3, wo: Vec3):
+    """Density of the tangent lobes (..., ) and of the cosine lobe, per unit solid angle."""
+    w, alpha, cb, sb, it = _tangent_weights(p, wi)
+    ot, on, ov = _components(wo, alpha, cb, sb)
+    th_i = safe_asin(jnp.clip(it, -1.0, 1.0))
+    th_r = safe_asin(jnp.clip(ot, -1.0, 1.0))
+    cr = safe_sqrt(1.0 - ot * ot)
+    x = th_r + th_i
+    dens = 0.5 * (_gauss(2.0 * _fam(p.gamma_s) * DEG, x) + _gauss(2.0 * _fam(p.gamma_v) * DEG, x))
+    ok = (on > 0) & (cr > 1e-9)
+    q = jnp.where(ok, dens / (jnp.pi * jnp.where(ok, cr, 1.0)), 0.0)
+    return jnp.sum(w * q, axis=(-2, -1))
+
+
+def _pdf(p: Params, wi: Vec3, wo: Vec3):
+    ok = (wi.z > 0) & (wo.z > 0)
+    lobes = _rotation_average(_lobe_density, p, wi, wo)
+    pdf = P_DIFFUSE * jnp.maximum(wo.z, 0.0) / jnp.pi + (1.0 - P_DIFFUSE) * lobes
+    return jnp.where(ok, pdf, 0.0)
+
+
+def _sample(p: Params, wi: Vec3, u):
+    shape = wi.shape
+    u0, u1, u2, u3, u4 = uniforms(u, shape, 5)
+    wi_given = wi
+    if p.n_rotations > 1:  # rotation k from u0, uniform on [P_DIFFUSE, 1) in the tangent branch
+        k = jnp.floor((u0 - P_DIFFUSE) / (1.0 - P_DIFFUSE) * p.n_rotations)
+        b = -2.0 * jnp.pi * jnp.clip(k, 0, p.n_rotations - 1) / p.n_rotations
+        wi = _rotate_z(wi, jnp.cos(b), jnp.sin(b))
+    w, alpha, cb, sb, it = _tangent_weights(p, wi)
+    J, T = w.shape[-2:]
+    flat = jnp.broadcast_to(w, shape + (J, T)).reshape(shape + (J * T,))
+    cdf = jnp.cumsum(flat, axis=-1)
+    idx = jnp.clip(jnp.sum(cdf <= (u1 * cdf[..., -1])[..., None], axis=-1), 0, J * T - 1)
+
+    def pick(a):  # (..., J, T) or (..., J, 1) -> value at the chosen sample
+        a = jnp.broadcast_to(a, shape + (J, T)).reshape(shape + (J * T,))
+        return jnp.take_along_axis(a, idx[..., None], axis=-1)[..., 0]
+
+    a_k, cb_k, sb_k, it_k = pick(alpha), pick(cb), pick(sb), pick(it)
+    gam = jnp.where(u2 < 0.5, pick(_fam(p.gamma_s)), pick(_fam(p.gamma_v))) * DEG
+    # theta_h ~ N(0, gamma) by the inverse normal CDF; theta_r = 2 theta_h - theta_i
+    z = math.sqrt(2.0) * erfinv(jnp.clip(2.0 * u3 - 1.0, -1.0 + 1e-12, 1.0 - 1e-12))
+    th_r = 2.0 * gam * z - safe_asin(jnp.clip(it_k, -1.0, 1.0))
+    ph_r = (u4 - 0.5) * jnp.pi
+    ct, st = jnp.cos(th_r), jnp.sin(th_r)
+    ca, sa = jnp.cos(a_k), jnp.sin(a_k)
+    # t = ca u + sa N, n = -sa u + ca N, v = N x u = (-sb, cb, 0)
+    wt_c, wn_c, wv_c = st, ct * jnp.cos(ph_r), ct * jnp.sin(ph_r)
+    ux, uy = cb_k, sb_k
+    lx = wt_c * ca * ux - wn_c * sa * ux - wv_c * sb_k
+    ly = wt_c * ca * uy - wn_c * sa * uy + wv_c * cb_k
+    lz = wt_c * sa + wn_c * ca
+    wo_t = Vec3(lx, ly, lz)
+    if p.n_rotations > 1:
+        wo_t = _rotate_z(wo_t, jnp.cos(b), -jnp.sin(b))
+        wi = wi_given
+    wo_d = warp.square_to_cosine_hemisphere(u1, u3)
+    diffuse = u0 < P_DIFFUSE
+    wo = Vec3(*(jnp.where(diffuse, a, b) for a, b in zip(wo_d, wo_t)))
+    valid = diffuse | (jnp.abs(th_r) < 0.5 * jnp.pi)
+    pdf = _pdf(p, wi, wo)
+    ok = valid & (wi.z > 0) & (wo.z > 0) & (pdf > 0)
+    pdf = jnp.where(ok, pdf, 0.0)
+    f = _eval(p, wi, wo)
+    scale = jnp.where(ok, wo.z / jnp.where(ok, pdf, 1.0), 0.0)
+    return wo, f * with_bands(scale), pdf
+
+
+eval = boundary(_eval, Params)
+"""BRDF f = R / (N.w_i) in 1/sr, bands last (D-C4; module docstring)."""
+radiance_response = boundary(_radiance_response, Params)
+"""The thesis' radiance response R(w_i, w_r) of Eq. 5.20 (= eval * N.w_i), bands last."""
+pdf = boundary(_pdf, Params)
+sample = boundary(_sample, Params)
+
+
+def from_weave(curves, coverage, *, eta=1.46, albedo=0.3, k_d=0.3, gamma_s=12.0, gamma_v=24.0,
+               family_angle=None, **kw) -> Params:
+    """Params from a list of :class:`.weave.Curve` (one per family) and per-family (or shared)
+    thread parameters; ``family_angle`` defaults to 0, 90, 0, 90, ... deg."""
+    c = weave.stack(curves)
+    j = len(curves)
+    fam = lambda v: jnp.broadcast_to(jnp.asarray(v, dtype=jnp.result_type(float)), (j,))  # noqa: E731
+    alb = jnp.asarray(albedo, dtype=jnp.result_type(float))
+    alb = jnp.broadcast_to(alb if alb.ndim == 2 else jnp.atleast_1d(alb)[None, :], (j, max(alb.shape[-1:] or (1,))))
+    if family_angle is None:
+        family_angle = [90.0 * (k % 2) for k in range(j)]
+    return Params(eta=eta, albedo=alb, k_d=fam(k_d), gamma_s=fam(gamma_s), gamma_v=fam(gamma_v),
+                  coverage=fam(coverage), offsets=c.offsets, lengths=c.lengths, family_angle=fam(family_angle), **kw)
+
+
+def preset(name: str, velvet_gamma_s: float = 6.0, **kw) -> Params:
+    """A fabric of Table 5.2 / E.1 (``cloth_presets.TABLE``); ``kw`` overrides fields/options."""
+    return Params(**{**cloth_presets.kwargs(name, velvet_gamma_s=velvet_gamma_s), **kw})
+
+
+def velvet(gamma_s: float = 6.0, **kw) -> Params:
+    """Velvet (Table 5.2 / E.1); gamma_s = 6 deg (repaired) or 9 (the OCR reading), D-C8."""
+    return preset("velvet", velvet_gamma_s=gamma_s, **kw)
+
+
+PRESETS = {name: preset(name) for name in cloth_presets.TABLE}
+
+MODEL = Model(
+    name="cloth",
+    kind="bsdf",
+    Params=Params,
+    eval=eval,
+    sample=sample,
+    pdf=pdf,
+    summary="Sadeghi's microcylinder cloth: thread BCSDF over tangent curves, masking, reweighting",
+    source="Sadeghi 2011 Ch. 5, App. E; Sadeghi et al. 2013 (ACM TOG 32(2))",
+    reciprocal=False,
+    presets=PRESETS,
+)
