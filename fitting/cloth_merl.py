@@ -61,20 +61,10 @@ def fit_cloth(fabrics, weaves, metric="cos_log", steps=200, n_rotations=8, n_sam
     for kind in weaves:
         init = cloth_weaves.Params(weave=kind, n_rotations=n_rotations, n_samples=n_samples, **CLOTH_INIT)
         t0 = time.perf_counter()
-        res = fit_batch(cloth_weaves.MODEL, tables[0], values, init=init, metric=metric,
-                        max_steps=steps)
+        res = fit_batch(cloth_weaves.MODEL, tables[0], values, init=init, metric=metric, max_steps=steps)
         progress(f"cloth_weave[{kind}]: {len(fabrics)} proxies fitted in {time.perf_counter() - t0:.1f} s "
                  f"({res.compile_time:.1f} s compile)")
-        for k, fabric in enumerate(fabrics):
-            item = res.item(k)
-            row = dict(fabric=fabric, model=f"cloth_weave[{kind}]", converged=bool(item.converged),
-                       iterations=int(res.iterations[k]),
-                       **{m: item.metrics[m] for m in ("cos_log_rmse", "log_rmse")},
-                       at_bound=" ".join(item.at_bound))
-            for lab, v, s in zip(item.labels, item.x, item.sigma):
-                row[lab] = float(v)
-                row[f"sigma({lab})"] = float(s)
-            rows.append(row)
+        rows += merl_fabrics.result_rows(res, fabrics, f"cloth_weave[{kind}]")
     return rows
 
 

@@ -75,15 +75,22 @@ def fit_fabrics(fabrics, models, metric="cos_log", progress=print):
                         max_steps=1000)
         progress(f"{model_name}: {len(fabrics)} proxies fitted in {time.perf_counter() - t0:.1f} s "
                  f"({res.compile_time:.1f} s compile, {res.wall_time:.2f} s solve)")
-        for k, fabric in enumerate(fabrics):
-            item = res.item(k)
-            row = dict(fabric=fabric, model=model_name, converged=bool(item.converged),
-                       iterations=int(res.iterations[k]), **{m: item.metrics[m] for m in ("cos_log_rmse", "log_rmse")},
-                       at_bound=" ".join(item.at_bound))
-            for lab, v, s in zip(item.labels, item.x, item.sigma):
-                row[lab] = float(v)
-                row[f"sigma({lab})"] = float(s)
-            rows.append(row)
+        rows += result_rows(res, fabrics, model_name)
+    return rows
+
+
+def result_rows(res, fabrics, model_label):
+    """One row dict per fabric of a batched fit: errors in both metrics, parameters and 1-sigma."""
+    rows = []
+    for k, fabric in enumerate(fabrics):
+        item = res.item(k)
+        row = dict(fabric=fabric, model=model_label, converged=bool(item.converged),
+                   iterations=int(res.iterations[k]), **{m: item.metrics[m] for m in ("cos_log_rmse", "log_rmse")},
+                   at_bound=" ".join(item.at_bound))
+        for lab, v, s in zip(item.labels, item.x, item.sigma):
+            row[lab] = float(v)
+            row[f"sigma({lab})"] = float(s)
+        rows.append(row)
     return rows
 
 

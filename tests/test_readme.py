@@ -100,3 +100,12 @@ def test_hair_example_runs():
         v = np.asarray(ns[k])
         assert v.shape == (3,) and np.all(np.isfinite(v)) and np.all(v >= 0) and v.max() > 0, k
     assert np.all(np.asarray(ns["se"]) >= 0)
+
+
+def test_cloth_example_runs():
+    ns: dict = {}
+    exec(compile(_block("cloth.eval("), "README cloth example", "exec"), ns)
+    f, f90, ft = (np.asarray(ns[k]) for k in ("f", "f_90", "f_t"))
+    for v, bands in ((f, 3), (f90, 3), (ft, 1)):  # the twill's albedo is one grey band
+        assert v.shape == (57, bands) and np.all(np.isfinite(v)) and np.all(v >= 0)
+    assert not np.allclose(f, f90)  # the weave is anisotropic
