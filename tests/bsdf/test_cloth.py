@@ -411,14 +411,14 @@ def test_cloth_weave_families_are_cloth_with_scaled_curves():
 
     wi, wo = _random_pairs(20, 66)
     for kind in ("plain", "satin", "twill"):
-        p = cloth_weaves.Params(weave=kind, alpha=20.0, n_rotations=2, n_samples=8)
+        p = cloth_weaves.Params(weave=kind, alpha=20.0, n_rotations=1, n_samples=4)
         np.testing.assert_allclose(np.asarray(cloth_weaves.eval(p, wi, wo)),
                                    np.asarray(cloth.eval(cloth_weaves.to_cloth(p), wi, wo)), rtol=1e-12)
     q = cloth_weaves.to_cloth(cloth_weaves.Params(weave="satin", alpha=32.0))
     front = cloth.PRESETS["polyester_satin_front"]
     np.testing.assert_allclose(np.asarray(q.offsets)[0], np.asarray(front.offsets)[0])
     np.testing.assert_allclose(np.asarray(q.lengths)[0], np.asarray(front.lengths)[0])
-    p = cloth_weaves.Params(weave="twill", n_rotations=2, n_samples=8)
+    p = cloth_weaves.Params(weave="twill", n_rotations=1, n_samples=4)
     d = jax.jvp(lambda a: cloth_weaves.eval.kernel(p.replace(alpha=a), wi, wo), (20.0,), (1.0,))[1]
     h = 1e-4
     fd = (np.asarray(cloth_weaves.eval(p.replace(alpha=20.0 + h), wi, wo))

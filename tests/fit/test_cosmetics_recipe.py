@@ -26,6 +26,7 @@ def float32():
     jax.config.update("jax_enable_x64", old)
 
 
+@pytest.mark.slow  # 80 s; notebooks/04_cosmetics.ipynb runs a gradient vs derivative-free fit by default
 def test_cosmetics_recipe_recovers_cd_and_alpha_quick(tmp_path, float32):
     """Matte 1 on a coarse in-plane table (theta_i 0..60 step 20, theta_o every 20 deg, missing cells
     emulated), 2 % noise stated as sigma, c_d and alpha free (the rest at the truth), LM with common

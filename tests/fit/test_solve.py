@@ -101,6 +101,7 @@ def test_noise_free_data_are_fitted_exactly_in_every_metric():
         assert res.loss < 1e-16
 
 
+@pytest.mark.slow  # 20 s; LM is the default of every other fit test, BFGS/Powell are exercised by the recipes
 def test_all_solvers_reach_the_same_optimum():
     model = registry.get("rough_conductor")
     truth = model.Params(alpha=0.2, specular_reflectance=(0.9, 0.8, 0.7))
