@@ -185,7 +185,9 @@ SLOW_GRID: dict[str, list[Case]] = {
               for name in ("linen_plain", "silk_crepe_de_chine", "silk_shot", "polyester_satin_back", "velvet")]
     + [Case("literal_full_eq58", dict(importlib.import_module("appearance_jax.bsdf.cloth_presets").kwargs("linen_plain"),
                                       n_samples=16, theta_d="full", volume_fresnel="eq58"),
-            opts={"skip": ("furnace",)})],
+            # the literal full theta_d is singular on the specular cone (D-C1): no energy bound, and
+            # central differences straddle the singularity
+            opts={"skip": ("furnace", "gradients")})],
     "chiang_hair": [
         Case("brown", dict()),
         Case("far_black", dict(sigma_a=(3.35, 5.58, 10.96), beta_m=0.6, beta_n=0.8, far_field=True, n_h=8)),
