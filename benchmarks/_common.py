@@ -3,11 +3,29 @@ directory is on ``sys.path``): timing, sharded inputs, and loading Mitsuba's LLV
 
 from __future__ import annotations
 
+import argparse
 import glob
 import os
+import platform
 import time
 
 import numpy as np
+
+
+def throughput_args(doc):
+    """The benchmarks' common command line (--n, --repeats, --devices); sets the number of JAX CPU
+    devices (before the backend starts) and prints the machine line."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--repeats", type=int, default=10)
+    ap.add_argument("--devices", type=int, default=os.cpu_count() or 1,
+                    help="JAX CPU devices to shard the batch over (default: cores)")
+    args = ap.parse_args()
+    import jax
+
+    jax.config.update("jax_num_cpu_devices", args.devices)
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
+    return args
 
 
 def best_time(fn, repeats):

@@ -19,12 +19,10 @@ printed as well.
 
 from __future__ import annotations
 
-import argparse
 import os
-import platform
 
 import numpy as np
-from _common import best_time, mitsuba_llvm, sharded_vec3
+from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
@@ -105,17 +103,8 @@ def bench_mitsuba(wi_np, wo_np, repeats):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--n", type=int, default=1_000_000)
-    ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--devices", type=int, default=os.cpu_count() or 1,
-                    help="JAX CPU devices to shard the batch over (default: cores)")
-    args = ap.parse_args()
-    import jax
-
-    jax.config.update("jax_num_cpu_devices", args.devices)  # before the backend starts
+    args = throughput_args(__doc__)
     wi, wo = random_pairs(args.n)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
     rows = []
     for nd in sorted({1, args.devices}):
         tj_e, tj_g, tj_f, jv = bench_jax(wi, wo, args.repeats, nd)

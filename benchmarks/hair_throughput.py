@@ -15,12 +15,9 @@ benchmarks/bsdf_throughput.py. Not a test: nothing here asserts a time.
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 
 import numpy as np
-from _common import best_time, mitsuba_llvm, sharded_vec3
+from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args
 
 BETA_M, BETA_N, ALPHA_DEG, EU = 0.3, 0.3, 2.0, 1.3
 
@@ -69,17 +66,8 @@ def bench_mitsuba(wi_np, wo_np, repeats):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--n", type=int, default=1_000_000)
-    ap.add_argument("--repeats", type=int, default=10)
-    ap.add_argument("--devices", type=int, default=os.cpu_count() or 1,
-                    help="JAX CPU devices to shard the batch over (default: cores)")
-    args = ap.parse_args()
-    import jax
-
-    jax.config.update("jax_num_cpu_devices", args.devices)  # before the backend starts
+    args = throughput_args(__doc__)
     wi, wo = random_pairs(args.n)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
     rows = []
     for nd in sorted({1, args.devices}):
         t, jv = bench_jax(wi, wo, args.repeats, nd)

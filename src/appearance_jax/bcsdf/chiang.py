@@ -15,7 +15,9 @@ attenuation A_p(h, theta_i), a longitudinal lobe M_p and an azimuthal lobe N_p:
 * M_p: d'Eon et al. 2011 Eq. 7, M = csch(1/v)/(2v) exp(-sin ti sin to / v) I0(cos ti cos to / v),
   evaluated for every v in the overflow-free form
   log M = log k - log(1 - e^(-2k)) - 2k sin^2((ti + to)/2) + log(I0e(k cos ti cos to)), k = 1/v
-  (I0e(x) = e^-x I0(x); the log-I0 form of d'Eon's appendix, exact rather than asymptotic).
+  (I0e(x) = e^-x I0(x); the log-I0 form of d'Eon's appendix, exact rather than asymptotic); the
+  eval kernel takes its exponential, k / (1 - e^(-2k)) e^(-2k s^2) I0e(.), whose factors are all
+  bounded (no log per pair).
   int M_p(ti, to) cos(to) dto = 1 for every ti. Variances (Chiang Eq. 7, pbrt):
   v0 = (0.726 b_m + 0.812 b_m^2 + 3.7 b_m^20)^2, v1 = v0/4, v2 = v3 = 4 v0.
 * Cuticle tilt (Chiang Sec. 4.3, pbrt): theta_i^(p) = theta_i - 2 alpha, + alpha, + 4 alpha for
