@@ -118,7 +118,7 @@ from ..core import warp
 from ..core.frame import reflect
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import param, params_class, static
-from ..core.quadrature import gauss_legendre
+from ..core.quadrature import piecewise_rule
 from ..core.rng import uniforms
 from ..core.special import safe_acos, safe_sqrt
 from ..core.vec import Vec3, dot, normalize
@@ -154,35 +154,6 @@ class Params:
 
 # ----------------------------------------------------------------------------------------
 # the rough interface's directional integrals
-
-
-@functools.lru_cache(maxsize=None)
-def _smoothstep_rule(n: int):
-    """Gauss-Legendre on [0, 1] pulled through s(t) = 3t^2 - 2t^3: nodes s, weights s'(t) w.
-
-    s' vanishes at both ends, so an integrand with a sqrt or (.)^(3/2) singularity at an end
-    of its piece becomes smooth in t (exponential convergence instead of algebraic).
-    """
-    t, w = gauss_legendre(n, 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t), 6.0 * t * (1.0 - t) * w
-
-
-def _pieces(bps, n: int, complement=None):
-    """Nodes and weights on consecutive pieces [bps[k], bps[k+1]] (last axis), flattened.
-
-    ``bps`` (..., nb) is non-decreasing; empty pieces get zero weight. Returns (x, w) of
-    shape (..., (nb - 1) n); with ``complement`` (= 1 - bps, computed accurately by the
-    caller) also 1 - x, without the cancellation of forming it from x.
-    """
-    s, ds = (jnp.asarray(v, dtype=bps.dtype) for v in _smoothstep_rule(n))
-    a = bps[..., :-1, None]
-    d = bps[..., 1:, None] - a
-    shape = a.shape[:-2] + (a.shape[-2] * n,)
-    x = (a + d * s).reshape(shape)
-    w = (d * ds).reshape(shape)
-    if complement is None:
-        return x, w
-    return x, w, (complement[..., :-1, None] - d * s).reshape(shape)
 
 
 def _polar_coordinate(theta, alpha):
@@ -277,7 +248,7 @@ def _interface_integral(kind, alpha, eta, mu, mode: str, n_theta: int, n_phi: in
     th_bps = jnp.concatenate([ends, th_bps, ends + half], axis=-1)
     a = alpha[..., None]
     q_bps, qc_bps = _polar_coordinate(th_bps, a)
-    q, wq, qc = _pieces(q_bps, n_theta, qc_bps)  # (..., Q)
+    q, wq, qc = piecewise_rule(q_bps, n_theta, qc_bps)  # (..., Q)
     tan_m, cos_m, wq = _facet_polar(kind, a, q, qc, wq)
     sin_m = tan_m * cos_m
 
@@ -289,7 +260,7 @@ def _interface_integral(kind, alpha, eta, mu, mode: str, n_theta: int, n_phi: in
         p_lo = _azimuth_of(mu[..., None] / (2.0 * cos_m), B, A)
         p_c = jnp.minimum(_azimuth_of(c_c[..., None], B, A), p_lo)
         phi_bps = [jnp.zeros_like(A), p_c, p_lo]
-    phi, wphi = _pieces(jnp.stack(phi_bps, axis=-1), n_phi)  # (..., Q, P)
+    phi, wphi = piecewise_rule(jnp.stack(phi_bps, axis=-1), n_phi)  # (..., Q, P)
     cphi = jnp.cos(phi)
 
     x1 = (..., None, None)
@@ -419,7 +390,7 @@ def _tables(p: Params) -> CoatTables:
     # R_int = 2 int_0^1 R(mu) mu dmu, split where a smooth coat has TIR (R has a sqrt kink)
     c_c = safe_sqrt(1.0 - 1.0 / (eta * eta))
     bps = jnp.concatenate([jnp.zeros_like(c_c), c_c, jnp.ones_like(c_c)], axis=-1)
-    mu, w = _pieces(bps, N_MU_RINT)
+    mu, w = piecewise_rule(bps, N_MU_RINT)
     R = interface_reflectance(kind, alpha, 1.0 / eta, mu)
     R_int = 2.0 * jnp.sum(w * mu * R, axis=-1)
     return CoatTables(coefs, R_int)

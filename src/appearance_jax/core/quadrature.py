@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import jax.numpy as jnp
 
@@ -33,3 +35,32 @@ def sphere_rule(n_theta: int, n_phi: int, hemisphere: bool = False):
     theta = np.arccos(np.clip(MU, -1.0, 1.0))
     d = spherical_direction(jnp.asarray(theta.ravel()), jnp.asarray(PHI.ravel()))
     return d, jnp.asarray(W.ravel())
+
+
+@functools.lru_cache(maxsize=None)
+def smoothstep_rule(n: int):
+    """Gauss-Legendre on [0, 1] pulled through s(t) = 3t^2 - 2t^3: nodes s, weights s'(t) w.
+
+    s' vanishes at both ends, so an integrand with a sqrt or (.)^(3/2) singularity at an end
+    of its piece becomes smooth in t (exponential convergence instead of algebraic).
+    """
+    t, w = gauss_legendre(n, 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t), 6.0 * t * (1.0 - t) * w
+
+
+def piecewise_rule(bps, n: int, complement=None):
+    """Nodes and weights on consecutive pieces [bps[k], bps[k+1]] (last axis), flattened.
+
+    ``bps`` (..., nb) is non-decreasing; empty pieces get zero weight. Returns (x, w) of
+    shape (..., (nb - 1) n); with ``complement`` (= 1 - bps, computed accurately by the
+    caller) also 1 - x, without the cancellation of forming it from x.
+    """
+    s, ds = (jnp.asarray(v, dtype=bps.dtype) for v in smoothstep_rule(n))
+    a = bps[..., :-1, None]
+    d = bps[..., 1:, None] - a
+    shape = a.shape[:-2] + (a.shape[-2] * n,)
+    x = (a + d * s).reshape(shape)
+    w = (d * ds).reshape(shape)
+    if complement is None:
+        return x, w
+    return x, w, (complement[..., :-1, None] - d * s).reshape(shape)
