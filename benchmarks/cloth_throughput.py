@@ -52,7 +52,7 @@ def main() -> int:
     print("| BSDF eval | pairs/s | ratio to rough_conductor |")
     print("|---|---|---|")
     for name, r in rows:
-        print(f"| {name} | {r:.2e} | {r / base:.3f} |")
+        print(f"| {name} | {r:.2e} | {r / base:.2e} |")
     return 0
 
 

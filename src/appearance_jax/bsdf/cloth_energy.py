@@ -92,6 +92,13 @@ def _interp(table, theta):
     x = (theta + 0.5 * math.pi) * ((N_THETA_I - 1) / math.pi)
     idx = jnp.clip(jnp.floor(x), 0, N_THETA_I - 2).astype(jnp.int32)
     frac = jnp.clip(x - idx, 0.0, 1.0)[..., None]
+    if table.ndim == 3:  # unbatched parameters: one gather from the flattened (J N, bands) table
+        J = table.shape[0]
+        flat = table.reshape(J * N_THETA_I, table.shape[-1])
+        k = idx + N_THETA_I * jnp.arange(J, dtype=jnp.int32)[:, None]  # (..., J, T)
+        v0, v1 = jnp.take(flat, k, axis=0), jnp.take(flat, k + 1, axis=0)
+        return v0 + frac * (v1 - v0)
+    # batched parameters: broadcast the tables to the directions' batch (slower: a copy per pair)
     shape = jnp.broadcast_shapes(table.shape[:-2], idx.shape[:-1])
     tb = jnp.broadcast_to(table, shape + table.shape[-2:])
     ib = jnp.broadcast_to(idx, shape + idx.shape[-1:])[..., None]
