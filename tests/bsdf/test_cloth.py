@@ -355,6 +355,20 @@ def test_thread_energy_tables_are_the_exit_albedo_of_one_flat_sample():
     np.testing.assert_allclose(a, C2 / np.maximum(C2, 1.0), rtol=5e-3)
 
 
+def test_thread_energy_interpolation_batched_tables():
+    """The exit-albedo interpolation gathers from one flattened table for unbatched parameters and broadcasts
+    batched tables; both paths agree, and hit the table values at the nodes."""
+    from appearance_jax.bsdf import cloth_energy
+
+    p = _p("silk_shot")
+    C2 = cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)[0]  # (J, N, bands)
+    th = jnp.asarray(np.random.default_rng(4).uniform(-1.6, 1.6, (40, 2, 5)))
+    fast, batched = cloth_energy._interp(C2, th), cloth_energy._interp(C2[None], th)
+    np.testing.assert_array_equal(np.asarray(fast), np.asarray(batched))
+    nodes = jnp.broadcast_to(jnp.asarray(cloth_energy.theta_nodes()[[3, 17, 40]]), (2, 3))
+    np.testing.assert_allclose(np.asarray(cloth_energy._interp(C2, nodes)), np.asarray(C2)[:, [3, 17, 40]], rtol=1e-12)
+
+
 def test_thread_energy_estimate_bounds_tilted_samples():
     """For a tilted sample, rho = cos(a) C2 + |sin a| C1 is an upper estimate ([x + y]_+ <= x_+ + y_+): the thesis-form
     albedo stays below it and the capped albedo below 1."""
