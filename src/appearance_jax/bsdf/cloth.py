@@ -90,11 +90,11 @@ the patch and the samples' weights shift towards the ones whose lobes point at w
 ``reweighting=False`` the same weaves stay <= 0.97). No bound of the form "each sample sends
 out at most what it intercepts" survives weights that depend on w_r. The floor raises the
 denominator to at least s F, F = sum_k a_k P(t_k, w_i): since P(t, w_i, w_r) <= P(t, w_i), every
-weight is then <= W_t = a_j P(t, w_i) / (s F), a function of w_i alone; the W_t sum to 1/s,
-and the patch gate is taken over the larger of the two weightings. With s = 1 the albedo is
+weight is then <= W_t / s, W_t = a_j P(t, w_i) / F, a function of w_i alone (the W_t sum to 1).
+The patch gate's E becomes the larger of its Eq. 5.20 value and s E_W, E_W the intercepted
+light averaged with the W_t. With s = 1 the albedo is
 <= sum_t W_t rho_t max(n.w_i, 0) min(1, N.w_i / E_W) / (N.w_i) <= 1 (each capped sample's
-rho_t <= 1; E_W the gate's average under W): a bound by construction, as exact as the exit
-albedo tables. F is the smallest floor for which flat weaves stay ungated. The default
+rho_t <= 1): a bound by construction, as exact as the exit albedo tables. F is the smallest floor for which flat weaves stay ungated. The default
 ``"grazing"`` ramps s smoothly (smoothstep in cos theta_i) from 0 at 75 deg incidence to 1 at
 85 deg: below 75 deg the model is the thesis' normalisation, bit for bit (the thesis'
 measurement geometry and the fitting tables lie there). ``"always"`` uses s = 1 at every
