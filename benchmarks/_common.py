@@ -12,11 +12,11 @@ import time
 import numpy as np
 
 
-def throughput_args(doc):
-    """The benchmarks' common command line (--n, --repeats, --devices); sets the number of JAX CPU
-    devices (before the backend starts) and prints the machine line."""
+def throughput_args(doc, n=1_000_000):
+    """The benchmarks' common command line (--n, default ``n``; --repeats, --devices); sets the
+    number of JAX CPU devices (before the backend starts) and prints the machine line."""
     ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
-    ap.add_argument("--n", type=int, default=1_000_000)
+    ap.add_argument("--n", type=int, default=n)
     ap.add_argument("--repeats", type=int, default=10)
     ap.add_argument("--devices", type=int, default=os.cpu_count() or 1,
                     help="JAX CPU devices to shard the batch over (default: cores)")
@@ -26,6 +26,19 @@ def throughput_args(doc):
     jax.config.update("jax_num_cpu_devices", args.devices)
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
     return args
+
+
+def upper_hemisphere_pairs(n, seed=0):
+    """(wi, wo), each (3, n) float32, uniform on the upper hemisphere (numpy)."""
+    rng = np.random.default_rng(seed)
+
+    def hemi():
+        v = rng.normal(size=(3, n))
+        v /= np.linalg.norm(v, axis=0)
+        v[2] = np.abs(v[2])
+        return v.astype(np.float32)
+
+    return hemi(), hemi()
 
 
 def best_time(fn, repeats):

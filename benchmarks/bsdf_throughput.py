@@ -21,24 +21,11 @@ from __future__ import annotations
 
 import os
 
-import numpy as np
-from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
 ALPHA = 0.3
-
-
-def random_pairs(n, seed=0):
-    rng = np.random.default_rng(seed)
-
-    def hemi():
-        v = rng.normal(size=(3, n))
-        v /= np.linalg.norm(v, axis=0)
-        v[2] = np.abs(v[2])
-        return v.astype(np.float32)
-
-    return hemi(), hemi()
 
 
 def bench_jax(wi_np, wo_np, repeats, n_devices=1):
@@ -104,7 +91,7 @@ def bench_mitsuba(wi_np, wo_np, repeats):
 
 def main():
     args = throughput_args(__doc__)
-    wi, wo = random_pairs(args.n)
+    wi, wo = upper_hemisphere_pairs(args.n)
     rows = []
     for nd in sorted({1, args.devices}):
         tj_e, tj_g, tj_f, jv = bench_jax(wi, wo, args.repeats, nd)

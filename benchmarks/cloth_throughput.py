@@ -16,27 +16,17 @@ from __future__ import annotations
 
 import sys
 
-from _common import best_time, sharded_vec3, throughput_args
+from _common import best_time, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 
 def main() -> int:
-    sys.argv += [] if any(a.startswith("--n") for a in sys.argv) else ["--n", "100000"]
-    args = throughput_args(__doc__)
+    args = throughput_args(__doc__, n=100_000)
     import jax
-    import numpy as np
 
     from appearance_jax.bsdf import cloth
     from appearance_jax.bsdf import rough_conductor as rc
 
-    rng = np.random.default_rng(0)
-
-    def hemi():
-        v = rng.normal(size=(3, args.n))
-        v /= np.linalg.norm(v, axis=0)
-        v[2] = np.abs(v[2])
-        return v.astype(np.float32)
-
-    wi, wo = sharded_vec3(hemi(), args.devices), sharded_vec3(hemi(), args.devices)
+    wi, wo = (sharded_vec3(v, args.devices) for v in upper_hemisphere_pairs(args.n))
 
     def rate(kernel, params):
         f = jax.jit(kernel)

@@ -15,7 +15,6 @@ benchmarks/bsdf_throughput.py. Not a test: nothing here asserts a time.
 
 from __future__ import annotations
 
-
 import numpy as np
 from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args
 

@@ -377,7 +377,7 @@ def test_thread_energy_estimate_bounds_tilted_samples():
     for alpha in (-40.0, 30.0):
         p = _one_sample(alpha)
         th = np.array([0.0, 30.0, 60.0, 80.0])
-        # light in the sample's normal-tangent plane (azimuth 0): theta_i(t) = theta - alpha... as asin(w_i . t)
+        # light in the sample's normal-tangent plane (azimuth 0); theta_i(t) = asin(w_i . t)
         t = np.array([np.cos(alpha * D), 0.0, np.sin(alpha * D)])
         wi = np.stack([np.sin(th * D), 0 * th, np.cos(th * D)], 1)
         th_t = np.arcsin(wi @ t)

@@ -89,7 +89,7 @@ import jax.numpy as jnp
 from ..core.frame import fiber_angles
 from ..core.model import Model, as_bands, boundary
 from ..core.params import param, params_class, static
-from ..core.special import safe_sqrt
+from ..core.special import safe_sqrt, smoothstep
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_amplitudes
 from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, wrap_pi
@@ -293,8 +293,7 @@ def trt_caustic(eta, theta_d, sigma_a, caustic_width, caustic_fade, caustic_limi
     d2 = jnp.abs(_d2phi_dh2(2, hc, eta_p))
     dh_c = 2.0 * safe_sqrt(2.0 * caustic_width / jnp.maximum(d2, 1e-12))
     dh = jnp.where(below, jnp.minimum(caustic_limit, dh_c), caustic_limit)
-    x = jnp.clip((eta_p - 2.0) / caustic_fade, 0.0, 1.0)
-    ss = x * x * (3.0 - 2.0 * x)
+    ss = smoothstep((eta_p - 2.0) / caustic_fade)
     t_above = 1.0 - ss if fade == "continuous" else ss
     t = jnp.where(below, 1.0, t_above)
     A = attenuation(2, hc, eta, theta_d, sigma_a, fresnel, chord)

@@ -186,7 +186,7 @@ from ..core import warp
 from ..core.model import Model, boundary, with_bands
 from ..core.params import integer, param, params_class, static
 from ..core.rng import uniforms
-from ..core.special import erfinv, safe_asin, safe_div, safe_sqrt
+from ..core.special import erfinv, safe_asin, safe_div, safe_sqrt, smoothstep
 from ..core.vec import Vec3
 from . import cloth_energy, cloth_presets, weave
 
@@ -307,8 +307,7 @@ def _floor_strength(p: Params, wi_z):
     if p.normalization_floor == "always":
         return jnp.ones_like(wi_z)
     lo, hi = (math.cos(v * DEG) for v in FLOOR_RAMP)
-    x = jnp.clip((lo - wi_z) / (lo - hi), 0.0, 1.0)  # 0 below 75 deg, 1 above 85 deg (in cos theta_i)
-    return x * x * (3.0 - 2.0 * x)
+    return smoothstep((lo - wi_z) / (lo - hi))  # 0 below 75 deg, 1 above 85 deg (in cos theta_i)
 
 
 def _weights(p: Params, P, P_i, wi_z):

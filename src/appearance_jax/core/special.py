@@ -133,6 +133,12 @@ def safe_div(a, b, eps: float = 0.0):
     return jnp.where(ok, a / jnp.where(ok, b, 1.0), 0.0)
 
 
+def smoothstep(x):
+    """3 x^2 - 2 x^3 of x clipped to [0, 1]: 0 -> 1 with zero slope at both ends."""
+    x = jnp.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
 def erf(x):
     return jax.scipy.special.erf(x)
 
