@@ -82,7 +82,7 @@ from jax.scipy.special import i0e
 
 from ..core.frame import fiber_angles, fiber_direction
 from ..core.model import Model, as_bands, boundary
-from ..core.params import integer, param, params_class, static
+from ..core.params import Bands, integer, param, params_class, Real, static
 from ..core.rng import uniforms
 from ..core.special import atan2, safe_asin, safe_sqrt
 from ..core.vec import Vec3
@@ -101,12 +101,12 @@ def _bool(v):
 
 @params_class
 class Params:
-    eta: object = param(1.55, lo=1.0, hi=4.0, lo_open=True, unit="1", doc="refractive index of the fiber")
-    sigma_a: object = param(_DEFAULT_SIGMA_A, lo=0.0, hi=1e3, unit="1/radius",
+    eta: Real = param(1.55, lo=1.0, hi=4.0, lo_open=True, unit="1", doc="refractive index of the fiber")
+    sigma_a: Bands = param(_DEFAULT_SIGMA_A, lo=0.0, hi=1e3, unit="1/radius",
                             doc="absorption coefficient per unit radius, per band", bands=True)
-    beta_m: object = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="longitudinal roughness")
-    beta_n: object = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="azimuthal roughness")
-    alpha: object = param(math.radians(2.0), lo=-math.pi / 8, hi=math.pi / 8, unit="rad",
+    beta_m: Real = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="longitudinal roughness")
+    beta_n: Real = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="azimuthal roughness")
+    alpha: Real = param(math.radians(2.0), lo=-math.pi / 8, hi=math.pi / 8, unit="rad",
                           doc="cuticle scale tilt")
     far_field: bool = static(False, choices=(False, True), doc="integrate the offset h over [-1, 1]",
                              convert=_bool)

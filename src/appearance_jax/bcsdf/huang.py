@@ -83,7 +83,7 @@ import jax.numpy as jnp
 from ..core import vec as V
 from ..core.frame import Frame, fiber_angles, reflect, refract
 from ..core.model import Model, as_bands, boundary
-from ..core.params import integer, param, params_class, static, validate
+from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.rng import is_prng_key, uniforms
 from ..core.special import safe_acos, safe_sqrt
 from ..core.vec import Vec3
@@ -104,14 +104,14 @@ def _even(v):
 
 @params_class
 class Params:
-    roughness: object = param(0.15, lo=0.0, hi=1.0, lo_open=True, unit="1",
+    roughness: Real = param(0.15, lo=0.0, hi=1.0, lo_open=True, unit="1",
                               doc="microfacet roughness beta of the cuticle (GGX/Beckmann)")
-    tilt: object = param(-0.05236, lo=-0.3, hi=0.3, unit="rad",
+    tilt: Real = param(-0.05236, lo=-0.3, hi=0.3, unit="rad",
                          doc="cuticle scale tilt alpha (Eq. 4.39); > 0 tilts towards the tip")
-    eta: object = param(1.55, lo=1.0, hi=3.0, lo_open=True, unit="1", doc="relative index of refraction")
-    sigma_a: object = param((0.309, 0.467, 0.891), lo=0.0, unit="1/radius", bands=True,
+    eta: Real = param(1.55, lo=1.0, hi=3.0, lo_open=True, unit="1", doc="relative index of refraction")
+    sigma_a: Bands = param((0.309, 0.467, 0.891), lo=0.0, unit="1/radius", bands=True,
                             doc="absorption coefficient per unit radius per band")
-    eccentricity: object = param(0.0, lo=0.0, hi=0.99, unit="1",
+    eccentricity: Real = param(0.0, lo=0.0, hi=0.99, unit="1",
                                  doc="eccentricity e = sqrt(1 - b^2) of the cross-section")
     distribution: str = static("ggx", choices=("ggx", "beckmann"), doc="microfacet distribution")
     r_mode: str = static("numeric", choices=("numeric", "analytic"),

@@ -88,7 +88,7 @@ import jax.numpy as jnp
 
 from ..core.frame import fiber_angles
 from ..core.model import Model, as_bands, boundary
-from ..core.params import param, params_class, static
+from ..core.params import Bands, param, params_class, Real, static
 from ..core.special import safe_sqrt, smoothstep
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_amplitudes
@@ -101,24 +101,24 @@ _MAX_DENSITY = 1e6     # cap of 1 / |2 dPhi/dh| at caustics
 
 @params_class
 class Params:
-    eta: object = param(1.55, lo=1.0, hi=4.0, lo_open=True, doc="refractive index of the cortex")
-    sigma_a: object = param((0.2, 0.3, 0.5), lo=0.0, unit="1/radius",
+    eta: Real = param(1.55, lo=1.0, hi=4.0, lo_open=True, doc="refractive index of the cortex")
+    sigma_a: Bands = param((0.2, 0.3, 0.5), lo=0.0, unit="1/radius",
                             doc="absorption per unit fiber radius", bands=True)
-    alpha: object = param(-5.0 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad",
+    alpha: Real = param(-5.0 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad",
                           doc="cuticle shift alpha_R of the R lobe (negative: toward the root)")
-    beta: object = param(7.5 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
+    beta: Real = param(7.5 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
                          doc="longitudinal width (std) beta_R of the R lobe")
-    alpha_tt: object = param(None, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TT (None: -alpha/2)")
-    alpha_trt: object = param(None, lo=-math.pi / 4, hi=math.pi / 4, unit="rad",
+    alpha_tt: Real | None = param(None, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TT (None: -alpha/2)")
+    alpha_trt: Real | None = param(None, lo=-math.pi / 4, hi=math.pi / 4, unit="rad",
                               doc="alpha_TRT (None: -3 alpha/2)")
-    beta_tt: object = param(None, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad", doc="beta_TT (None: beta/2)")
-    beta_trt: object = param(None, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad", doc="beta_TRT (None: 2 beta)")
-    axis_ratio: object = param(1.0, lo=0.5, hi=1.0, doc="cross-section axis ratio a (eccentricity; TRT only)")
-    glint_scale: object = param(0.5, lo=0.0, hi=10.0, doc="glint intensity k_G")
-    caustic_width: object = param(15.0 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
+    beta_tt: Real | None = param(None, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad", doc="beta_TT (None: beta/2)")
+    beta_trt: Real | None = param(None, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad", doc="beta_TRT (None: 2 beta)")
+    axis_ratio: Real = param(1.0, lo=0.5, hi=1.0, doc="cross-section axis ratio a (eccentricity; TRT only)")
+    glint_scale: Real = param(0.5, lo=0.0, hi=10.0, doc="glint intensity k_G")
+    caustic_width: Real = param(15.0 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
                                   doc="caustic width w_c (std of the glint Gaussians)")
-    caustic_fade: object = param(0.3, lo=0.0, hi=2.0, lo_open=True, doc="caustic fade range Delta eta'")
-    caustic_limit: object = param(0.5, lo=0.0, hi=2.0, lo_open=True, doc="caustic intensity limit Delta h_M")
+    caustic_fade: Real = param(0.3, lo=0.0, hi=2.0, lo_open=True, doc="caustic fade range Delta eta'")
+    caustic_limit: Real = param(0.5, lo=0.0, hi=2.0, lo_open=True, doc="caustic intensity limit Delta h_M")
     fresnel: str = static("bravais", choices=("bravais", "exact"), doc="Fresnel: MJC03 Bravais pair or exact 3D")
     chord: str = static("corrected", choices=("corrected", "mjc03"), doc="absorption path length")
     caustic: str = static("mjc03", choices=("mjc03", "none"), doc="TRT caustic fade + glints, or none")

@@ -85,7 +85,7 @@ import numpy as np
 
 from ..core.frame import fiber_angles
 from ..core.model import Model, as_bands, boundary
-from ..core.params import integer, param, params_class, static, validate
+from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.quadrature import gauss_legendre
 from ..core.special import erf, safe_sqrt
 from ..core.vec import Vec3
@@ -99,27 +99,27 @@ A_F_MAX = 0.99
 
 @params_class
 class Params:
-    color_r: object = param((1.0, 1.0, 1.0), lo=0.0, doc="C_R specular colour", bands=True)
-    intensity_r: object = param(1.0, lo=0.0, doc="I_R specular scale")
-    alpha_r: object = param(-5.0 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_R specular offset")
-    beta_r: object = param(7.5 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
+    color_r: Bands = param((1.0, 1.0, 1.0), lo=0.0, doc="C_R specular colour", bands=True)
+    intensity_r: Real = param(1.0, lo=0.0, doc="I_R specular scale")
+    alpha_r: Real = param(-5.0 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_R specular offset")
+    beta_r: Real = param(7.5 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
                            doc="beta_R specular roughness (std)")
-    color_tt: object = param(HAIR_COLOR, lo=0.0, doc="C_TT transmission colour", bands=True)
-    intensity_tt: object = param(1.0, lo=0.0, doc="I_TT transmission scale")
-    alpha_tt: object = param(2.5 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TT offset")
-    beta_tt: object = param(3.75 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
+    color_tt: Bands = param(HAIR_COLOR, lo=0.0, doc="C_TT transmission colour", bands=True)
+    intensity_tt: Real = param(1.0, lo=0.0, doc="I_TT transmission scale")
+    alpha_tt: Real = param(2.5 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TT offset")
+    beta_tt: Real = param(3.75 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
                             doc="beta_TT transmission roughness (std)")
-    gamma_tt: object = param(30.0 * DEG, lo=0.0, hi=math.pi, lo_open=True, unit="rad",
+    gamma_tt: Real = param(30.0 * DEG, lo=0.0, hi=math.pi, lo_open=True, unit="rad",
                              doc="gamma_TT transmission spread (azimuthal std)")
-    color_trt: object = param(HAIR_COLOR, lo=0.0, doc="C_TRT subspecular colour", bands=True)
-    intensity_trt: object = param(1.0, lo=0.0, doc="I_TRT subspecular scale")
-    alpha_trt: object = param(7.5 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TRT offset")
-    beta_trt: object = param(15.0 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
+    color_trt: Bands = param(HAIR_COLOR, lo=0.0, doc="C_TRT subspecular colour", bands=True)
+    intensity_trt: Real = param(1.0, lo=0.0, doc="I_TRT subspecular scale")
+    alpha_trt: Real = param(7.5 * DEG, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_TRT offset")
+    beta_trt: Real = param(15.0 * DEG, lo=0.0, hi=math.pi / 2, lo_open=True, unit="rad",
                              doc="beta_TRT subspecular roughness (std)")
-    glint_intensity: object = param(0.5, lo=0.0, doc="I_g glint intensity relative to TRT")
-    glint_width: object = param(5.0 * DEG, lo=0.0, hi=math.pi, lo_open=True, unit="rad",
+    glint_intensity: Real = param(0.5, lo=0.0, doc="I_g glint intensity relative to TRT")
+    glint_width: Real = param(5.0 * DEG, lo=0.0, hi=math.pi, lo_open=True, unit="rad",
                                 doc="gamma_g azimuthal std of the glints")
-    glint_angle: object = param(37.5 * DEG, lo=0.0, hi=math.pi / 2, unit="rad",
+    glint_angle: Real = param(37.5 * DEG, lo=0.0, hi=math.pi / 2, unit="rad",
                                 doc="G_angle half angle between the glints")
 
 
@@ -127,14 +127,14 @@ class Params:
 class DualParams:
     """Dual-scattering densities, artist adjusters (§4.6.2, L1750-1755) and decisions."""
 
-    d_f: object = param(0.7, lo=0.0, hi=1.0, doc="forward-scattering density factor d_f")
-    d_b: object = param(0.7, lo=0.0, hi=1.0, doc="backscattering density factor d_b")
-    color_forward: object = param((1.0, 1.0, 1.0), lo=0.0, doc="C_Forward colour adjust", bands=True)
-    intensity_forward: object = param(1.0, lo=0.0, doc="I_Forward intensity adjust")
-    color_back: object = param((1.0, 1.0, 1.0), lo=0.0, doc="C_Back colour adjust", bands=True)
-    intensity_back: object = param(1.0, lo=0.0, doc="I_Back intensity adjust")
-    alpha_back: object = param(0.0, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_Back shift adjust")
-    beta_back: object = param(0.0, lo=0.0, unit="rad^2", doc="beta_Back variance adjust (added to sigma_b^2)")
+    d_f: Real = param(0.7, lo=0.0, hi=1.0, doc="forward-scattering density factor d_f")
+    d_b: Real = param(0.7, lo=0.0, hi=1.0, doc="backscattering density factor d_b")
+    color_forward: Bands = param((1.0, 1.0, 1.0), lo=0.0, doc="C_Forward colour adjust", bands=True)
+    intensity_forward: Real = param(1.0, lo=0.0, doc="I_Forward intensity adjust")
+    color_back: Bands = param((1.0, 1.0, 1.0), lo=0.0, doc="C_Back colour adjust", bands=True)
+    intensity_back: Real = param(1.0, lo=0.0, doc="I_Back intensity adjust")
+    alpha_back: Real = param(0.0, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_Back shift adjust")
+    beta_back: Real = param(0.0, lo=0.0, unit="rad^2", doc="beta_Back variance adjust (added to sigma_b^2)")
     a_b_denominator: str = static("cube", choices=("cube", "square"),
                                   doc="Eq. 4.27 second denominator: Zinke's cube (D-H1) or the thesis' square")
     clamp: str = static("clamp", choices=("clamp", "raw"), doc="max(T_f - directFraction, 0) (D-H5)")

@@ -58,7 +58,7 @@ import math
 import jax.numpy as jnp
 
 from ..core.model import as_bands, boundary
-from ..core.params import param, params_class, static
+from ..core.params import Bands, param, params_class, Real, static
 from ..core.special import safe_sqrt
 from ..core.vec import Vec3, dot
 from ..optics.fresnel import fresnel_dielectric
@@ -71,11 +71,11 @@ VOLUME_FRESNEL = ("longitudinal", "eq58")
 
 @params_class
 class Params:
-    eta: object = param(1.46, lo=1.0, hi=3.0, doc="refractive index of the thread")
-    albedo: object = param(0.3, lo=0.0, hi=1.0, doc="A: coloured volume albedo", bands=True)
-    k_d: object = param(0.3, lo=0.0, hi=1.0, doc="isotropic fraction of the volume scattering")
-    gamma_s: object = param(12.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the surface Gaussian")
-    gamma_v: object = param(24.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the volume Gaussian")
+    eta: Real = param(1.46, lo=1.0, hi=3.0, doc="refractive index of the thread")
+    albedo: Bands = param(0.3, lo=0.0, hi=1.0, doc="A: coloured volume albedo", bands=True)
+    k_d: Real = param(0.3, lo=0.0, hi=1.0, doc="isotropic fraction of the volume scattering")
+    gamma_s: Real = param(12.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the surface Gaussian")
+    gamma_v: Real = param(24.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the volume Gaussian")
     theta_d: str = static("half", choices=THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d (Eq. 5.11)")
     volume_fresnel: str = static("longitudinal", choices=VOLUME_FRESNEL, doc="D-C2: F of the volume term (Eq. 5.10)")
 

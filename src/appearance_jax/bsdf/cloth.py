@@ -184,7 +184,7 @@ import numpy as np
 from ..bcsdf import thread
 from ..core import warp
 from ..core.model import Model, boundary, with_bands
-from ..core.params import integer, param, params_class, static
+from ..core.params import Bands, integer, param, params_class, Real, static
 from ..core.rng import uniforms
 from ..core.special import erfinv, safe_asin, safe_div, safe_sqrt, smoothstep
 from ..core.vec import Vec3
@@ -206,21 +206,21 @@ def _width(v):
 
 @params_class
 class Params:
-    eta: object = param(1.46, lo=1.0, hi=3.0, doc="refractive index of the threads")
-    albedo: object = param(((0.3, 0.3, 0.3), (0.3, 0.3, 0.3)), lo=0.0, hi=1.0,
+    eta: Real = param(1.46, lo=1.0, hi=3.0, doc="refractive index of the threads")
+    albedo: Bands = param(((0.3, 0.3, 0.3), (0.3, 0.3, 0.3)), lo=0.0, hi=1.0,
                            doc="A per family (rows) and band (last axis)", bands=True)
-    k_d: object = param((0.3, 0.3), lo=0.0, hi=1.0, doc="isotropic volume fraction per family")
-    gamma_s: object = param((12.0, 12.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
+    k_d: Real = param((0.3, 0.3), lo=0.0, hi=1.0, doc="isotropic volume fraction per family")
+    gamma_s: Real = param((12.0, 12.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
                             doc="surface Gaussian std per family")
-    gamma_v: object = param((24.0, 24.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
+    gamma_v: Real = param((24.0, 24.0), lo=0.0, hi=90.0, lo_open=True, unit="deg",
                             doc="volume Gaussian std per family")
-    coverage: object = param((0.5, 0.5), lo=0.0, hi=1.0, doc="area coverage a_j per family")
-    offsets: object = param(((-25.0, 25.0), (-25.0, 25.0)), lo=-90.0, hi=90.0, unit="deg",
+    coverage: Real = param((0.5, 0.5), lo=0.0, hi=1.0, doc="area coverage a_j per family")
+    offsets: Real = param(((-25.0, 25.0), (-25.0, 25.0)), lo=-90.0, hi=90.0, unit="deg",
                             doc="tangent-curve offsets per family (rows)")
-    lengths: object = param(((1.0,), (1.0,)), lo=0.0, doc="tangent-curve segment lengths per family (0 = jump)")
-    family_angle: object = param((0.0, 90.0), lo=-360.0, hi=360.0, unit="deg",
+    lengths: Real = param(((1.0,), (1.0,)), lo=0.0, doc="tangent-curve segment lengths per family (0 = jump)")
+    family_angle: Real = param((0.0, 90.0), lo=-360.0, hi=360.0, unit="deg",
                                  doc="direction of each family in the surface plane")
-    rotation: object = param(0.0, lo=-360.0, hi=360.0, unit="deg", doc="rotation of the weave about the normal")
+    rotation: Real = param(0.0, lo=-360.0, hi=360.0, unit="deg", doc="rotation of the weave about the normal")
     masking_width: float = static(20.0, convert=_width, doc="std (deg) of u() in Eqs. 5.16, 5.19 (D-C5)")
     n_samples: int = static(64, convert=integer(1, 1024), doc="T, samples per tangent curve (D-C9)")
     theta_d: str = static("half", choices=thread.THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d")

@@ -46,7 +46,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..core.model import Model, boundary
-from ..core.params import integer, param, params_class, static
+from ..core.params import Bands, integer, param, params_class, Real, static
 from . import cloth, weave
 
 KNEE_RATIO = 18.0 / 32.0  # Polyester Satin Charmeuse front (Table E.1): knee 18 deg of 32
@@ -62,16 +62,16 @@ def _curves(kind: str, a):
 
 @params_class
 class Params:
-    eta: object = param(1.46, lo=1.0, hi=3.0, unit="1", doc="refractive index of the threads")
-    albedo_1: object = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo A of family 1, per band", bands=True)
-    albedo_2: object = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo A of family 2, per band", bands=True)
-    k_d_1: object = param(0.3, lo=0.0, hi=1.0, unit="1", doc="isotropic volume fraction of family 1")
-    k_d_2: object = param(0.3, lo=0.0, hi=1.0, unit="1", doc="isotropic volume fraction of family 2")
-    gamma_s_1: object = param(8.0, lo=0.5, hi=60.0, unit="deg", doc="surface lobe std of family 1")
-    gamma_s_2: object = param(8.0, lo=0.5, hi=60.0, unit="deg", doc="surface lobe std of family 2")
-    gamma_v_1: object = param(16.0, lo=0.5, hi=90.0, unit="deg", doc="volume lobe std of family 1")
-    gamma_v_2: object = param(16.0, lo=0.5, hi=90.0, unit="deg", doc="volume lobe std of family 2")
-    alpha: object = param(25.0, lo=0.0, hi=80.0, unit="deg", doc="largest tangent offset of the weave")
+    eta: Real = param(1.46, lo=1.0, hi=3.0, unit="1", doc="refractive index of the threads")
+    albedo_1: Bands = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo A of family 1, per band", bands=True)
+    albedo_2: Bands = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo A of family 2, per band", bands=True)
+    k_d_1: Real = param(0.3, lo=0.0, hi=1.0, unit="1", doc="isotropic volume fraction of family 1")
+    k_d_2: Real = param(0.3, lo=0.0, hi=1.0, unit="1", doc="isotropic volume fraction of family 2")
+    gamma_s_1: Real = param(8.0, lo=0.5, hi=60.0, unit="deg", doc="surface lobe std of family 1")
+    gamma_s_2: Real = param(8.0, lo=0.5, hi=60.0, unit="deg", doc="surface lobe std of family 2")
+    gamma_v_1: Real = param(16.0, lo=0.5, hi=90.0, unit="deg", doc="volume lobe std of family 1")
+    gamma_v_2: Real = param(16.0, lo=0.5, hi=90.0, unit="deg", doc="volume lobe std of family 2")
+    alpha: Real = param(25.0, lo=0.0, hi=80.0, unit="deg", doc="largest tangent offset of the weave")
     weave: str = static("satin", choices=("plain", "satin", "twill"), doc="weave family")
     n_rotations: int = static(8, convert=integer(1, 64), doc="orientation average (1 = off)")
     n_samples: int = static(16, convert=integer(1, 1024), doc="T, samples per tangent curve")

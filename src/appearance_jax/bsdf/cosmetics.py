@@ -57,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.model import Model, boundary
-from ..core.params import integer, param, params_class, static, validate
+from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.vec import Vec3
 from ..layered import medium
 from ..mc.layered import Bottom, walk
@@ -73,8 +73,8 @@ class Params(medium.Params):
     """Table 4.1: the medium's fields (:class:`appearance_jax.layered.medium.Params`: c_d, albedo_d,
     albedo_p, w_g, g1, g2, alpha, theta), the layer thickness and the base."""
 
-    thickness: object = param(16.0, lo=0.0, hi=1e3, unit="mfp", doc="layer thickness t in base mean free paths")
-    base_reflectance: object = param(0.0, lo=0.0, hi=1.0, unit="1", doc="albedo of the Lambertian base",
+    thickness: Real = param(16.0, lo=0.0, hi=1e3, unit="mfp", doc="layer thickness t in base mean free paths")
+    base_reflectance: Bands = param(0.0, lo=0.0, hi=1.0, unit="1", doc="albedo of the Lambertian base",
                                      bands=True)
     n_samples: int = static(128, convert=integer(2, 2**20), doc="random-walk paths per direction pair")
     max_bounces: int = static(256, convert=integer(1, 4096), doc="steps of each random walk")

@@ -100,7 +100,7 @@ import numpy as np
 
 from ..core import spectral
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class, static
+from ..core.params import Bands, param, params_class, Real, static
 from ..core.vec import Vec3
 from ..microfacet import cook_torrance as ct
 from ..microfacet import distribution as md
@@ -109,14 +109,14 @@ from ..optics.thinfilm import airy
 
 @params_class
 class Params:
-    alpha: object = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
-    alpha_v: object = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
-    thickness: object = param(500.0, lo=0.0, hi=5000.0, unit="nm", doc="film thickness")
-    eta_film: object = param(1.33, lo=1.0, hi=3.0, unit="1", doc="refractive index of the film (real)")
-    eta_substrate: object = param(1.0, lo=0.0, hi=20.0, unit="1", doc="real part of the substrate's index")
-    k_substrate: object = param(0.0, lo=0.0, hi=50.0, unit="1", doc="extinction coefficient of the substrate")
-    eta_outside: object = param(1.0, lo=1.0, hi=3.0, unit="1", doc="refractive index of the incidence medium")
-    specular_reflectance: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="reflectance scale per band", bands=True)
+    alpha: Real = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
+    alpha_v: Real | None = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
+    thickness: Real = param(500.0, lo=0.0, hi=5000.0, unit="nm", doc="film thickness")
+    eta_film: Real = param(1.33, lo=1.0, hi=3.0, unit="1", doc="refractive index of the film (real)")
+    eta_substrate: Real = param(1.0, lo=0.0, hi=20.0, unit="1", doc="real part of the substrate's index")
+    k_substrate: Real = param(0.0, lo=0.0, hi=50.0, unit="1", doc="extinction coefficient of the substrate")
+    eta_outside: Real = param(1.0, lo=1.0, hi=3.0, unit="1", doc="refractive index of the incidence medium")
+    specular_reflectance: Bands = param(1.0, lo=0.0, hi=1.0, unit="1", doc="reflectance scale per band", bands=True)
     distribution: str = static("ggx", choices=md.KINDS, doc="microfacet normal distribution")
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 form")
     color: str = static("rgb3", choices=spectral.COLOR_MODES, doc="output bands: rgb3, cie (linear sRGB), spectral")

@@ -21,14 +21,14 @@ import jax.numpy as jnp
 
 from ..core import warp
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class
+from ..core.params import Bands, param, params_class
 from ..core.rng import uniforms
 from ..core.vec import Vec3
 
 
 @params_class
 class Params:
-    reflectance: object = param(0.5, lo=0.0, hi=1.0, unit="1", doc="diffuse albedo per band", bands=True)
+    reflectance: Bands = param(0.5, lo=0.0, hi=1.0, unit="1", doc="diffuse albedo per band", bands=True)
 
 
 def _active(wi: Vec3, wo: Vec3):

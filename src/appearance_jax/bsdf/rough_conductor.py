@@ -44,7 +44,7 @@ from __future__ import annotations
 import functools
 
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class, static
+from ..core.params import Bands, param, params_class, Real, static
 from ..core.vec import Vec3
 from ..microfacet import cook_torrance as ct
 from ..microfacet import distribution as md
@@ -56,12 +56,12 @@ AU_K_RGB = (3.6024, 1.9729, 1.8466)
 
 @params_class
 class Params:
-    alpha: object = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
-    alpha_v: object = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
-    eta: object = param(AU_ETA_RGB, lo=0.0, hi=20.0, unit="1", doc="real part of the relative complex index",
+    alpha: Real = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
+    alpha_v: Real | None = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
+    eta: Bands = param(AU_ETA_RGB, lo=0.0, hi=20.0, unit="1", doc="real part of the relative complex index",
                         bands=True)
-    k: object = param(AU_K_RGB, lo=0.0, hi=50.0, unit="1", doc="extinction coefficient (imaginary part)", bands=True)
-    specular_reflectance: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="reflectance scale per band", bands=True)
+    k: Bands = param(AU_K_RGB, lo=0.0, hi=50.0, unit="1", doc="extinction coefficient (imaginary part)", bands=True)
+    specular_reflectance: Bands = param(1.0, lo=0.0, hi=1.0, unit="1", doc="reflectance scale per band", bands=True)
     distribution: str = static("ggx", choices=md.KINDS, doc="microfacet normal distribution")
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 form")
 

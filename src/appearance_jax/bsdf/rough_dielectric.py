@@ -77,7 +77,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 from ..core.model import Model, boundary, with_bands
-from ..core.params import param, params_class, static
+from ..core.params import param, params_class, Real, static
 from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
 from ..microfacet import cook_torrance as ct
@@ -87,9 +87,9 @@ from ..optics.fresnel import fresnel_dielectric
 
 @params_class
 class Params:
-    alpha: object = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
-    alpha_v: object = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
-    eta: object = param(1.5, lo=0.2, hi=5.0, unit="1", doc="relative index eta_int / eta_ext, |eta - 1| >= 1e-3")
+    alpha: Real = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="microfacet roughness (RMS slope) along x / u")
+    alpha_v: Real | None = param(None, lo=1e-3, hi=2.0, unit="1", doc="roughness along y / v (None: isotropic)")
+    eta: Real = param(1.5, lo=0.2, hi=5.0, unit="1", doc="relative index eta_int / eta_ext, |eta - 1| >= 1e-3")
     distribution: str = static("ggx", choices=md.KINDS, doc="microfacet normal distribution")
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 form")
 

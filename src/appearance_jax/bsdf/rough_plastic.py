@@ -117,7 +117,7 @@ import numpy as np
 from ..core import warp
 from ..core.frame import reflect
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class, static
+from ..core.params import Bands, param, params_class, Real, static
 from ..core.quadrature import piecewise_rule
 from ..core.rng import uniforms
 from ..core.special import safe_acos, safe_sqrt
@@ -142,10 +142,10 @@ _BECKMANN_R2_MAX = 100.0
 
 @params_class
 class Params:
-    alpha: object = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="coat roughness (isotropic)")
-    diffuse_reflectance: object = param(0.5, lo=0.0, hi=1.0, unit="1", doc="albedo of the diffuse base", bands=True)
-    specular_reflectance: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="scale of the coat reflection", bands=True)
-    eta: object = param(1.5, lo=1.0, hi=3.0, unit="1", doc="relative index eta_coat / eta_exterior")
+    alpha: Real = param(0.1, lo=1e-3, hi=2.0, unit="1", doc="coat roughness (isotropic)")
+    diffuse_reflectance: Bands = param(0.5, lo=0.0, hi=1.0, unit="1", doc="albedo of the diffuse base", bands=True)
+    specular_reflectance: Bands = param(1.0, lo=0.0, hi=1.0, unit="1", doc="scale of the coat reflection", bands=True)
+    eta: Real = param(1.5, lo=1.0, hi=3.0, unit="1", doc="relative index eta_coat / eta_exterior")
     distribution: str = static("ggx", choices=md.KINDS, doc="microfacet normal distribution")
     nonlinear: bool = static(False, choices=(False, True), doc="tint every internal bounce by the base albedo")
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 of the specular lobe")

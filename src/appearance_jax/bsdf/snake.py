@@ -147,7 +147,7 @@ import numpy as np
 from ..core import spectral, warp
 from ..core.linalg import solve_diagonally_dominant
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import check_int, integer, param, params_class, static
+from ..core.params import Bands, check_int, integer, param, params_class, Real, static
 from ..core.quadrature import gauss_legendre
 from ..core.rng import is_prng_key, uniforms
 from ..core.vec import Vec3
@@ -159,15 +159,15 @@ UNDERSIDE_MODES = ("top", "airy")
 
 @params_class
 class Params:
-    thickness: object = param(900.0, lo=0.0, hi=5000.0, unit="nm", doc="film thickness delta_0")
-    eta0: object = param(1.0, lo=1.0, hi=3.0, unit="1", doc="index of the top medium")
-    eta1: object = param(1.56, lo=1.0, hi=3.0, unit="1", doc="index of the film (keratin)")
-    eta2: object = param(1.0, lo=1.0, hi=3.0, unit="1", doc="index of the medium below the film")
-    sigma_a: object = param(0.7, lo=0.0, unit="1/depth unit", doc="absorption coefficient, per wavelength",
+    thickness: Real = param(900.0, lo=0.0, hi=5000.0, unit="nm", doc="film thickness delta_0")
+    eta0: Real = param(1.0, lo=1.0, hi=3.0, unit="1", doc="index of the top medium")
+    eta1: Real = param(1.56, lo=1.0, hi=3.0, unit="1", doc="index of the film (keratin)")
+    eta2: Real = param(1.0, lo=1.0, hi=3.0, unit="1", doc="index of the medium below the film")
+    sigma_a: Bands = param(0.7, lo=0.0, unit="1/depth unit", doc="absorption coefficient, per wavelength",
                             bands=True)
-    depth: object = param(2.0, lo=0.0, unit="nm (thesis)",
+    depth: Real = param(2.0, lo=0.0, unit="nm (thesis)",
                           doc="absorbing-layer thickness delta_1 (only sigma_a * depth matters)")
-    kd: object = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo of the diffuse reflector", bands=True)
+    kd: Bands = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo of the diffuse reflector", bands=True)
     absorption: str = static("product", choices=ABSORPTION_FORMS,
                              doc="f_1 absorption: Eq. 3.6 as printed, or the Beer double pass")
     underside: str = static("top", choices=UNDERSIDE_MODES,

@@ -77,6 +77,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import typing
 from typing import Any, Mapping
 
 import jax
@@ -149,9 +150,24 @@ def _field_plan(models: list[Model]) -> tuple[list[dataclasses.Field], tuple[tup
     return fields, tuple(mapping)
 
 
+def _component_field(composite_field: str, mapping) -> str:
+    """The component field a composite field stands for."""
+    for pairs in mapping:
+        for s, c in pairs:
+            if s == composite_field:
+                return c
+    return composite_field
+
+
 def _make_params(name: str, models: list[Model]) -> type:
     """The composite's params class, labelled ``<name>.Params`` in validation errors and reprs."""
     fields, mapping = _field_plan(models)
+    # each field keeps its component's annotation (Real, Bands, str, ...)
+    hints = {}
+    for m in models:
+        for n, t in typing.get_type_hints(m.Params).items():
+            hints.setdefault(n, t)
+    annotations = {n: hints.get(_component_field(n, mapping), object) for n, _ in fields}
 
     def split(self):
         """The components' parameter objects (one per component) built from this one."""
@@ -182,7 +198,7 @@ def _make_params(name: str, models: list[Model]) -> type:
     # dataclasses.make_dataclass: it applies @dataclass itself, before params_class could
     # install the __post_init__ that the generated __init__ must call, and a second, frozen
     # @dataclass on its class raises "Cannot overwrite attribute __setattr__")
-    ns: dict[str, Any] = {"__annotations__": {n: object for n, _ in fields}}
+    ns: dict[str, Any] = {"__annotations__": annotations}
     ns.update(fields)
     ns.update(split=split, _validate=_validate, __reduce_ex__=__reduce_ex__,
               components=tuple(m.name for m in models), field_map=mapping,

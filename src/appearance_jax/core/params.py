@@ -30,6 +30,15 @@ import numpy as np
 
 _META_KEY = "appearance_jax"
 
+# Annotations of numeric parameter fields. Both are jax arrays of the default float dtype
+# once a Params is constructed (python numbers, sequences and numpy arrays are converted).
+#: A real parameter: a scalar, or an array that broadcasts against the direction arrays
+#: (leading axes for spatially varying parameters). Declared with ``param(...)``.
+Real = float | jax.Array
+#: A band-valued parameter (``param(..., bands=True)``): a scalar (the same in every band)
+#: or a trailing bands axis (RGB or wavelengths), optionally with leading axes.
+Bands = float | tuple[float, ...] | jax.Array
+
 
 @dataclass(frozen=True)
 class ParamSpec:

@@ -61,7 +61,7 @@ import jax.numpy as jnp
 
 from ..core.frame import reflect
 from ..core.model import with_bands
-from ..core.params import param, params_class
+from ..core.params import Bands, param, params_class, Real
 from ..core.vec import Vec3, dot, normalize, where
 from ..microfacet import sggx
 from ..phase.henyey_greenstein import direction_about, hg_value, sample_cos
@@ -69,16 +69,16 @@ from ..phase.hg_mixture import mixture_value
 
 @params_class
 class Params:
-    c_d: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="relative diffuser concentration sigma_d / sigma_base")
-    albedo_d: object = param(0.95, lo=0.0, hi=1.0, unit="1", doc="diffuser single-scattering albedo Lambda_d",
+    c_d: Real = param(0.9, lo=0.0, hi=1.0, unit="1", doc="relative diffuser concentration sigma_d / sigma_base")
+    albedo_d: Bands = param(0.95, lo=0.0, hi=1.0, unit="1", doc="diffuser single-scattering albedo Lambda_d",
                              bands=True)
-    albedo_p: object = param(0.9, lo=0.0, hi=1.0, unit="1", doc="platelet single-scattering albedo Lambda_p",
+    albedo_p: Bands = param(0.9, lo=0.0, hi=1.0, unit="1", doc="platelet single-scattering albedo Lambda_p",
                              bands=True)
-    w_g: object = param(1.0, lo=0.0, hi=1.0, unit="1", doc="weight of the diffusers' HG lobe 1")
-    g1: object = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 1")
-    g2: object = param(-0.2, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 2")
-    alpha: object = param(0.2, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="platelet SGGX roughness alpha_p")
-    theta: object = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
+    w_g: Real = param(1.0, lo=0.0, hi=1.0, unit="1", doc="weight of the diffusers' HG lobe 1")
+    g1: Real = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 1")
+    g2: Real = param(-0.2, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 2")
+    alpha: Real = param(0.2, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="platelet SGGX roughness alpha_p")
+    theta: Real = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
                           doc="tilt theta_p of the mean platelet normal about x (Table A.1: degrees)")
 
 

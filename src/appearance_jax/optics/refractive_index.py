@@ -48,7 +48,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.params import param, params_class, static, validate
+from ..core.params import param, params_class, Real, static, validate
 from ..core.special import safe_div, safe_sqrt
 
 # Relative slack of the eager range check (see the module docstring).
@@ -138,8 +138,8 @@ def _evaluate(model, wl):
 class Constant(_IndexModel):
     """Wavelength-independent index n + i k."""
 
-    n: object = param(1.5, lo=0.0, lo_open=True, unit="1", doc="real part of the refractive index")
-    k: object = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
+    n: Real = param(1.5, lo=0.0, lo_open=True, unit="1", doc="real part of the refractive index")
+    k: Real = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
     name: str = static("", doc="material name (for messages)")
     wavelength_range_nm: tuple | None = static(None, doc="optional valid range (lo, hi) in nm")
 
@@ -159,11 +159,11 @@ class Cauchy(_IndexModel):
     Cauchy (1836); e.g. Hecht, *Optics*, §3.5. B in um^2, C in um^4, D in um^6.
     """
 
-    A: object = param(1.5, lo=0.0, lo_open=True, unit="1", doc="index at infinite wavelength")
-    B: object = param(0.0, unit="um^2", doc="coefficient of lambda^-2")
-    C: object = param(0.0, unit="um^4", doc="coefficient of lambda^-4")
-    D: object = param(0.0, unit="um^6", doc="coefficient of lambda^-6")
-    k: object = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
+    A: Real = param(1.5, lo=0.0, lo_open=True, unit="1", doc="index at infinite wavelength")
+    B: Real = param(0.0, unit="um^2", doc="coefficient of lambda^-2")
+    C: Real = param(0.0, unit="um^4", doc="coefficient of lambda^-4")
+    D: Real = param(0.0, unit="um^6", doc="coefficient of lambda^-6")
+    k: Real = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
     name: str = static("", doc="material name (for messages)")
     wavelength_range_nm: tuple | None = static(None, doc="optional valid range (lo, hi) in nm")
 
@@ -183,10 +183,10 @@ class Sellmeier(_IndexModel):
     Below a resonance (lambda^2 < C_i) n^2 may become negative; n is then clamped at 0.
     """
 
-    B: object = param((0.6961663, 0.4079426, 0.8974794), unit="1", doc="oscillator strengths")
-    C: object = param((0.0684043**2, 0.1162414**2, 9.896161**2), lo=0.0, unit="um^2",
+    B: Real = param((0.6961663, 0.4079426, 0.8974794), unit="1", doc="oscillator strengths")
+    C: Real = param((0.0684043**2, 0.1162414**2, 9.896161**2), lo=0.0, unit="um^2",
                       doc="squared resonance wavelengths")
-    k: object = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
+    k: Real = param(0.0, lo=0.0, unit="1", doc="extinction coefficient")
     name: str = static("", doc="material name (for messages)")
     wavelength_range_nm: tuple | None = static(None, doc="optional valid range (lo, hi) in nm")
 
@@ -218,11 +218,11 @@ class Tabulated(_IndexModel):
     a traced call returns the end values (clamped). ``k`` defaults to zeros.
     """
 
-    wavelength_nm: object = param((400.0, 700.0), lo=0.0, lo_open=True, unit="nm",
+    wavelength_nm: Real = param((400.0, 700.0), lo=0.0, lo_open=True, unit="nm",
                                   doc="strictly increasing sample wavelengths")
-    n: object = param((1.5, 1.5), lo=0.0, unit="1", doc="real part of the index at the samples")
+    n: Real = param((1.5, 1.5), lo=0.0, unit="1", doc="real part of the index at the samples")
     # no lower bound: measured tables may dip below 0 in noisy bands (taken as given)
-    k: object = param(None, unit="1", doc="extinction coefficient at the samples (default 0)")
+    k: Real | None = param(None, unit="1", doc="extinction coefficient at the samples (default 0)")
     name: str = static("", doc="material name (for messages)")
 
     def _validate(self):
@@ -363,7 +363,7 @@ class Formula(_IndexModel):
     """
 
     kind: int = static(1, choices=tuple(range(1, 10)), doc="refractiveindex.info formula number")
-    coefficients: object = param((0.0,), unit="um powers", doc="C1, C2, ... of the formula")
+    coefficients: Real = param((0.0,), unit="um powers", doc="C1, C2, ... of the formula")
     wavelength_range_nm: tuple | None = static(None, doc="valid range (lo, hi) in nm")
     name: str = static("", doc="material name (for messages)")
 

@@ -51,7 +51,7 @@ import jax.numpy as jnp
 
 from ..core.frame import orthonormal_basis
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class
+from ..core.params import Bands, param, params_class
 from ..core.rng import uniforms
 from ..core.special import safe_sqrt
 from ..core.vec import Vec3, dot
@@ -61,7 +61,7 @@ INV_4PI = 0.25 / jnp.pi
 
 @params_class
 class Params:
-    g: object = param(0.0, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
+    g: Bands = param(0.0, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
                       doc="asymmetry parameter (mean cosine); > 0 forward, < 0 backward", bands=True)
 
 

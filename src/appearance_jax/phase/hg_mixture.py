@@ -44,7 +44,7 @@ import jax
 import jax.numpy as jnp
 
 from ..core.model import Model, as_bands, boundary, with_bands
-from ..core.params import param, params_class
+from ..core.params import Bands, param, params_class
 from ..core.rng import uniforms
 from ..core.vec import Vec3, dot
 from .henyey_greenstein import direction_about, hg_value, sample_cos, sampling_g
@@ -55,10 +55,10 @@ _ONE_MINUS = 1.0 - 2.0**-24
 
 @params_class
 class Params:
-    w_g: object = param(0.5, lo=0.0, hi=1.0, unit="1", doc="weight of HG lobe 1", bands=True)
-    g1: object = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
+    w_g: Bands = param(0.5, lo=0.0, hi=1.0, unit="1", doc="weight of HG lobe 1", bands=True)
+    g1: Bands = param(0.5, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
                        doc="asymmetry of HG lobe 1", bands=True)
-    g2: object = param(-0.3, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
+    g2: Bands = param(-0.3, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1",
                        doc="asymmetry of HG lobe 2", bands=True)
 
 

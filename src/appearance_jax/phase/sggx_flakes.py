@@ -48,7 +48,7 @@ import jax.numpy as jnp
 
 from ..core.frame import reflect
 from ..core.model import Model, boundary, with_bands
-from ..core.params import param, params_class
+from ..core.params import param, params_class, Real
 from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
 from ..microfacet import sggx
@@ -56,9 +56,9 @@ from ..microfacet import sggx
 
 @params_class
 class Params:
-    alpha: object = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1",
+    alpha: Real = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1",
                           doc="platelet SGGX roughness alpha_p (1 = isotropic flakes)")
-    theta: object = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
+    theta: Real = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
                           doc="tilt theta_p of the mean flake normal about the tangent x (Table A.1: degrees)")
 
 
