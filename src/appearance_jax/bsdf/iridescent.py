@@ -4,8 +4,8 @@ A film of index eta_film and thickness d covers a substrate of complex index
 eta_substrate + i k_substrate, under an incidence medium eta_outside. Every microfacet
 reflects like the flat film at the facet angle theta_d, cos theta_d = wi.h
 (Belcour & Barla 2017, "A practical extension to microfacet theory for the modeling of
-varying iridescence", ACM TOG 36(4); spec M11 of Padron Griffe 2025, which uses it for the
-"rough thin-film" snake of its Fig. 3.6(c), [T:550]):
+varying iridescence", ACM TOG 36(4); spec M11 of Padrón Griffé 2025, which uses it for the
+"rough thin-film" snake of Padrón Fig. 3.6(c), [T:550]):
 
     f(wi, wo) = s R(lambda, wi.h) D(h) G2(wi, wo, h) / (4 cos theta_i cos theta_o),
     h = (wi + wo) / |wi + wo|
@@ -30,16 +30,14 @@ k = k_substrate / eta_outside (tested to 1e-10). R is periodic in d with period
 lambda / (2 eta_film cos theta_1) (:func:`~appearance_jax.optics.thinfilm.film_period_nm`):
 fits of the thickness need several starts.
 
-Misprint in the thesis: Eq. 3.1 of Padron Griffe 2025 ([T:461] of seed 000), printed as the
-reflected intensity I_R, is the film's *transmittance* (R = 1 - T for a lossless film);
-the thesis' separate pi phase jumps (Eq. 3.3) are carried by the signs of the amplitudes
-here. :func:`~appearance_jax.optics.thinfilm.airy` implements the corrected form (tested
-against ``tmm``), and this model only calls it.
+Misprint in the thesis: Padrón Eq. 3.1 ([T:461] of seed 000), printed as the reflected
+intensity I_R, is the film's *transmittance*; :func:`~appearance_jax.optics.thinfilm.airy`
+implements the corrected form (tested against ``tmm``), and this model only calls it.
 
 Colour (static ``color``, :data:`appearance_jax.core.spectral.COLOR_MODES`):
 
 - ``"rgb3"`` (default): 3 bands, R at the single wavelengths 650, 510, 475 nm that stand for
-  R, G, B in Padron Griffe 2025 ([T:526]): 3 Airy evaluations per pair. Cheap, but a
+  R, G, B in Padrón Griffé 2025 ([T:526]): 3 Airy evaluations per pair. Cheap, but a
   point sample of an oscillating spectrum aliases ([T:526]): for films thicker than ~1 um
   the spectrum oscillates faster than 3 samples can represent and the colours are wrong
   (spurious saturated hues) rather than the near-white of higher-order interference.
@@ -50,14 +48,8 @@ Colour (static ``color``, :data:`appearance_jax.core.spectral.COLOR_MODES`):
   clipped to 0 (a BRDF is non-negative), the only non-linearity of this mode.
 - ``"spectral"``: one band per wavelength of the static ``wavelengths`` (nm).
 
-Differences from Belcour & Barla 2017: they anti-alias R analytically, integrating the
-Airy sum term by term (each a cosine of the optical path difference) against Gaussian fits
-of the XYZ sensitivities in Fourier space, so their RGB costs a few Fresnel evaluations;
-we integrate the CIE CMFs numerically on a 5-nm grid ("cie": 81 Airy evaluations per
-sample, exact for the film up to the rectangle rule) or point-sample ("rgb3": 3 Airy
-evaluations, the thesis' mode). Their film sits on a dielectric or conductor base as
-here; we take the exact complex amplitudes of both interfaces from ``airy`` rather than
-their separate Fresnel magnitudes and phase shifts.
+Differences from Belcour & Barla 2017 (their analytic spectral anti-aliasing is not used)
+and the history of the colour modes: docs/microfacet.md.
 
 | parameter            | default      | range              | unit | meaning                                          |
 |----------------------|--------------|--------------------|------|--------------------------------------------------|
@@ -168,20 +160,20 @@ sample = boundary(_sample, Params)
 PRESETS = {
     # A free-standing soap film (water 1.33 between air and air: Huang 2022 shades bubbles
     # with "air on both sides", seed 001 §1.1.5); ~1 um thick as the simulated films of Huang
-    # 2022 (2 eta_0 = 1 um, Table 3.2, [T:502-506] of seed 001): pale higher-order colours,
+    # 2022 (2 eta_0 = 1 um, Huang Table 3.2, [T:502-506] of seed 001): pale higher-order colours,
     # best rendered with color="cie" (rgb3 aliases at this thickness). alpha = 0.05 is ours (a
     # nearly smooth film, wide enough for the microfacet model).
     "soap_film": Params(alpha=0.05, thickness=1000.0, eta_film=1.33, eta_substrate=1.0, k_substrate=0.0),
     # Keratin film over an absorbing melanin layer (the structure of rock-dove barbules, Huang
-    # 2022, and of the snake skin's eumelanin pigment layer, Padron 2025 Ch. 3): eta_film = 1.56
-    # (keratin, Padron 2025 Sec. 3.5.2 [T:540, 547, 550]); melanin 1.648 + 0.0632 i as printed
+    # 2022, and of the snake skin's eumelanin pigment layer, Padrón 2025 Ch. 3): eta_film = 1.56
+    # (keratin, Padrón Sec. 3.5.2 [T:540, 547, 550]); melanin 1.648 + 0.0632 i as printed
     # by Huang 2022 ([T:307], [T:2286] of seed 001; his code's Cauchy law gives n = 1.716 at
     # 589 nm, see spec 001 §0.4 item 11); d = 595 nm, the green upper-neck rock dove
     # ([T:1517-1519] of seed 001). alpha = 0.15 is ours. Treating melanin as a semi-infinite
     # absorber keeps only the film's own reflection (weakly modulated, |r_12| ~ 0.03).
     "keratin_on_melanin": Params(alpha=0.15, thickness=595.0, eta_film=1.56, eta_substrate=1.648,
                                  k_substrate=0.0632),
-    # Padron 2025 Fig. 3.6(c), "rough thin-film interference" [T:550]: eta_0 = 1 (air),
+    # Padrón Fig. 3.6(c), "rough thin-film interference" [T:550]: eta_0 = 1 (air),
     # eta_1 = 1.56, eta_2 = 1.0, delta = 900 nm, RGB at 650/510/475 nm [T:526]. The thesis
     # never gives the roughness (spec 000 §0.4 item 7): alpha = 0.1 (GGX) is ours.
     "snake_fig_3_6c": Params(alpha=0.1, thickness=900.0, eta_film=1.56, eta_substrate=1.0, k_substrate=0.0,

@@ -3,7 +3,7 @@
     f(wi, wo) = R F(wi.h; eta + i k) D(h) G2(wi, wo, h) / (4 cos theta_i cos theta_o),
     h = (wi + wo) / |wi + wo|
 
-(Cook & Torrance 1982; Walter et al. 2007, Eq. 20; Padron 2025 spec M08 with the Fresnel
+(Cook & Torrance 1982; Walter et al. 2007, Eq. 20; Padrón 2025 spec M08 with the Fresnel
 term taken at the microfacet angle wi.h), for wi, wo both above the surface, else 0.
 D and G2 come from :mod:`appearance_jax.microfacet.distribution`; F is the exact
 unpolarised conductor reflectance (:func:`~appearance_jax.optics.fresnel.fresnel_conductor`).

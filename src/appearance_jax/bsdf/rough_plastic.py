@@ -29,38 +29,17 @@ mirrored directions, and the separable Smith G1 for the second direction, as in 
 They are single-scattering quantities: light masked by the microsurface is lost, so the
 albedo is < 1 even for a white base (about 0.55 at alpha = 0.5). Both depend only on
 (alpha, eta, distribution); they are computed **inside** the jitted function
-(differentiable in alpha and eta, float32 or float64), once per parameter set
-(~5e5 integrand evaluations, ~10 ms on one CPU core), by a fixed quadrature
+(differentiable in alpha and eta, float32 or float64), once per parameter set, by a fixed
+piecewise Gauss-Legendre quadrature cut at the integrand's known kinks
 (:func:`interface_transmittance`, :func:`interface_reflectance`), then looked up per
-direction (O(64) flops). Spatially varying alpha / eta (leading axes) cost one set of
-tables per element.
-
-Quadrature: over the facet polar angle theta in q = 1 - cos(theta'), theta' its value in
-the alpha = 1 configuration (tan theta' = tan theta / alpha), which absorbs the peak of D for
-any alpha and, for GGX, the heavy tail; and over the facet azimuth. Both axes are cut at
-every angle where the integrand has a kink that is known in closed form (visibility
-c = wi.m = 0, the horizon of the mirrored direction, total internal reflection at
-c = sqrt(1 - 1/eta^2), theta = pi/4 for GGX's tail, Beckmann slopes 3 and 6), and each piece
-gets a 24-point Gauss-Legendre rule through the smoothstep map x = a + (b - a)(3t^2 - 2t^3),
-which removes the sqrt-type endpoint singularities. Measured (float64): <= 2e-6 from
-adaptive scipy quadrature at normal incidence, <= 1e-6 from a 4x finer rule (1e-5 for T
-within mu < 1e-3 of grazing at GGX alpha = 1e-3), converging onto ours: a 192^2
-Gauss-Legendre rule over the visible-normal sampler's warp (T: 3e-6).
+direction. Spatially varying alpha / eta (leading axes) cost one set of tables per element.
 
 ``tables`` chooses how T(mu) and R_int are discretised:
 
-- ``"accurate"`` (default): T is a Chebyshev interpolant on 64 nodes in sqrt(mu)
-  (rel. error <= 3.4e-6 for alpha <= 0.7, 2.5e-5 at GGX alpha = 2, 2e-5 within mu < alpha of
-  grazing at alpha = 1e-3), and R_int a Gauss-Legendre integral over mu split at the
-  critical cosine (rel. error <= 7e-6, typically 1e-8).
-- ``"mitsuba"``: Mitsuba 3's discretisation: T linearly interpolated in mu between the 64
-  nodes mu_k = max(1e-6, k/63), and R_int = 2 mean_k(mu_k R(mu_k)) over the same nodes.
-  That equal-weight mean underestimates the integral by ~1/64 of itself (R_int 0.7-1.5%
-  low, f_diff up to 4.5% low); the linear interpolation of T errs by 3e-5 (alpha = 0.3) to
-  3e-3 (alpha = 1e-3) for mu > 0.05. Use it to reproduce Mitsuba: the node values are still
-  our accurate integrals (Mitsuba's own 32x32 and 128x128 Gauss-Legendre rules over its
-  visible-normal warp differ from them by <= 4e-4 (GGX) and <= 2e-3 (Beckmann), see
-  tests/validation/test_mitsuba_rough_plastic.py).
+- ``"accurate"`` (default): T is a Chebyshev interpolant on 64 nodes in sqrt(mu), R_int a
+  Gauss-Legendre integral over mu split at the critical cosine.
+- ``"mitsuba"``: Mitsuba 3's discretisation (T linear in mu between 64 equispaced nodes,
+  R_int an equal-weight mean over them, about 1% low); use it to reproduce Mitsuba.
 
 Sampling (as Mitsuba): the specular lobe (visible normals of wi, then mirror) with
 probability P_s = (1 - T_i) w_s / ((1 - T_i) w_s + T_i (1 - w_s)), w_s = mean(k_s) /
@@ -94,6 +73,8 @@ G1 is Walter's rational approximation (rel. error < 0.35%; here the exact erf fo
 default ``int_ior`` is polypropylene 1.49 over air 1.000277 (eta 1.48959; here 1.5), its
 discretisation of the coat integrals is ``tables="mitsuba"``, and its ``eval`` returns
 f cos theta_o.
+
+Measured accuracy of the coat tables, the quadrature's design and cost: docs/microfacet.md.
 
 Example::
 

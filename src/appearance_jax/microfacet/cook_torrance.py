@@ -2,7 +2,7 @@
 
     f(wi, wo) = F(wi.h) D(h) G2(wi, wo, h) / (4 cos theta_i cos theta_o),   h = (wi + wo) / |wi + wo|
 
-(Cook & Torrance 1982; Walter et al. 2007, Eq. 20; Padron 2025 spec M08, with the Fresnel
+(Cook & Torrance 1982; Walter et al. 2007, Eq. 20; Padrón 2025 spec M08, with the Fresnel
 term at the microfacet angle wi.h), for wi, wo both above the surface, else 0. Every
 reflective microfacet BSDF of the library (``rough_conductor``: conductor Fresnel;
 ``iridescent``: Airy thin film) is this function with its own ``fresnel(cos_h)``, which
