@@ -2,7 +2,7 @@
 
 Two layers, nothing between them, everything azimuth-independent (spec M26/M38, §2.1):
 
-* **Layer 0, the film** (Eqs. 3.4-3.5, Padrón 2025): a smooth delta interface that mirrors
+* **Layer 0, the film** (Padrón Eqs. 3.4-3.5): a smooth delta interface that mirrors
   with the Airy reflectance R(mu, lambda) and transmits **straight through** (no refraction,
   the thesis' convention) with T = 1 - R:
 
@@ -10,8 +10,8 @@ Two layers, nothing between them, everything azimuth-independent (spec M26/M38, 
 
   R is :func:`appearance_jax.optics.thinfilm.airy` for the film (eta_1, thickness delta_0)
   between eta_0 (above) and eta_2 (below), unpolarised, one value per wavelength. (The
-  printed Eq. 3.1 is the film's *transmittance*; the spec's M10 correction is used.)
-* **Layer 1, the absorbing diffuse BRDF** (Eq. 3.6, Padrón 2025), mu = |n . w|:
+  printed Padrón Eq. 3.1 is the film's *transmittance*; the spec's M10 correction is used.)
+* **Layer 1, the absorbing diffuse BRDF** (Padrón Eq. 3.6), mu = |n . w|:
 
       "product" (printed, default):  f_1 = k_d / pi exp(-sigma_a delta_1 / (mu_i mu_o))
       "beer_sum" (physical double pass, spec [OCR-FIX]):
@@ -36,31 +36,12 @@ F(., mu_o) = (I - K)^{-1} u(mu_o) for *any* mu_o, and the Nyström interpolation
 
     F(mu_i, mu_o) = f_1(mu_i, mu_o) + u(mu_i)^T M u(mu_o),     M = diag(D) (I - K)^{-1}
 
-M = (diag(D)^{-1} - f_1)^{-1} is symmetric, so F is symmetric (it is symmetrised
-numerically, so reciprocity holds to rounding). The directional albedo of f_d uses the same
-rule: A_d(mu_i) = T(mu_i) sum_j 2 pi w_j mu_j T_u(mu_j) F(mu_i, mu_j) = T(mu_i) u(mu_i) . Q,
-Q = c + M f_1 c, c_j = 2 pi w_j mu_j T_u(mu_j). One (n, n) solve per band and parameter
-set, then O(n^2) per direction pair; exact to the quadrature, jittable, vmappable and
-differentiable (:func:`~appearance_jax.core.linalg.solve_diagonally_dominant`). With k_d = 1, sigma_a = 0 the rule reproduces the
-white furnace R(mu) + A_d(mu) = 1 to rounding (it integrates mu exactly).
-
-*The rule.* Gauss-Legendre on two panels, [0, s] (n // 4 nodes) and [s, 1] (the rest,
-through mu = s + (1 - s) t^2 (2 - t)), where s = mu_c is the cosine below which the
-underside reflectance is total (TIR at the exit medium: eta_0 < eta_2 for ``"airy"``,
-eta_2 < eta_0 for ``"top"``), else 0. R_u - 1 ~ sqrt(mu - mu_c) above the kink; the map
-makes that smooth, so the convergence stays spectral instead of ~n^-2. s is continuous in
-the indices and the rule is continuous in s, so f_d and its gradients do not jump where a
-kink appears (eta_2 = eta_0, the default); without a kink the first panel is idle.
-Measured max relative error against 512 nodes (25 x 25 cosines in [0.02, 1]):
-
-| configuration                                 | 32 nodes | 48 nodes (default) | 64 nodes |
-|-----------------------------------------------|----------|--------------------|----------|
-| defaults (product), beer_sum                  | 7e-9, 2e-9 | 2e-11, 4e-12     | 2e-14    |
-| kd 0.9, sigma_a 0.05, eta_1 2.5 (strong)      | 3e-8     | 2e-9               | 2e-12    |
-| eta_2 1.5 ``"airy"`` / eta_0 1.33 (TIR kink)  | 1e-5     | 9e-7 / 4e-7        | 9e-8     |
-| delta_0 = 5000 nm (fast oscillation of R)     | 6e-5     | 5e-5               | 6e-6     |
-
-Thick films (R oscillating many times over mu) need more nodes: raise ``n_nodes``.
+M is symmetric, so F is symmetric (symmetrised numerically: reciprocity holds to
+rounding). The directional albedo of f_d uses the same rule. One (n, n) solve per band and
+parameter set, then O(n^2) per direction pair; exact to the quadrature, jittable,
+vmappable and differentiable. The rule is Gauss-Legendre on two panels split at the cosine
+of total internal reflection under the film (if any), so the convergence stays spectral;
+thick films (R oscillating many times over mu) need more nodes: raise ``n_nodes``.
 
 **What ``eval`` returns.** ``eval`` is the *non-delta* part f_d (1/sr, bands trailing); the
 mirror lobe's weight R(mu_i) is :func:`specular` (the spec's ``delta_weight``). A path
@@ -69,15 +50,10 @@ the directional albedo of f_d, spec §2.1.4) -- :func:`sample_full` does that. `
 ``pdf`` cover f_d only: cosine-weighted hemisphere, pdf = mu_o / pi, weight = pi f_d.
 mu <= 0 (below the horizon or grazing) gives exactly 0 with finite gradients.
 
-**Underside reflectance** (decision D14 of the spec, static ``underside``):
-``"top"`` (default, D14): reuse the top-side R(mu) (exact for eta_2 = eta_0; consistent with
-the straight-through convention; moot in the thesis' figures, where k_d = 0 whenever eta_2
-varies). ``"airy"``: the Airy R for light hitting the film from the eta_2 side at the
-cosine mu of its (unrefracted) direction, i.e. ``airy(mu, lambda, delta_0, eta_2, eta_1,
-eta_0)``; it has total internal reflection for eta_2 > eta_0. Then the exit transmission is
-1 - R_u(mu_o) while the entry is 1 - R(mu_i): energy is conserved, but the model is **not
-reciprocal** when eta_2 != eta_0 (straight-through films are reciprocal only when both
-sides see the same R). ``Model.reciprocal`` refers to the default.
+**Underside reflectance** (static ``underside``): ``"top"`` (default, spec decision D14)
+reuses the top-side R(mu); ``"airy"`` takes the Airy R seen from the eta_2 side (total
+internal reflection for eta_2 > eta_0), which conserves energy but is **not reciprocal**
+when eta_2 != eta_0. ``Model.reciprocal`` refers to the default.
 
 **Colour** (static ``color``, :data:`appearance_jax.core.spectral.COLOR_MODES`):
 ``"rgb3"`` evaluates at 650/510/475 nm (R, G, B; [T:526], prone to spectral aliasing);
@@ -87,33 +63,27 @@ spectrum, so the conversion of the BSDF value is exact). ``kd`` and ``sigma_a`` 
 wavelengths of the computation: a scalar, or one value per wavelength (3 for rgb3,
 ``len(wavelengths)`` for spectral, 81 for cie).
 
-**Q-S5 (flagged, not fixed).** With k_d = 0 (the thesis' Figs. 3.5 and 3.6(d)), f_1 = 0, so
-f_d = 0 and the model is exactly the film over a black substrate, R(mu) delta_mirror: the
-absorption (sigma_a, delta_1) has no effect at all. The darkening from Fig. 3.6(c) to (d)
-cannot come from this layer as printed.
+With k_d = 0 (Padrón Figs. 3.5 and 3.6(d)) f_d = 0 and the absorption has no
+effect (flagged Q-S5).
 
 | parameter  | default    | range       | unit           | meaning                                          |
 |------------|------------|-------------|----------------|--------------------------------------------------|
 | thickness  | 900        | [0, 5000]   | nm             | film thickness delta_0                           |
 | eta0       | 1.0        | [1, 3]      | 1              | index of the top medium (air)                    |
-| eta1       | 1.56       | [1, 3]      | 1              | film index (keratin; Table 3.1 prints 1.53)      |
+| eta1       | 1.56       | [1, 3]      | 1              | film index (keratin; Padrón Table 3.1 prints 1.53) |
 | eta2       | 1.0        | [1, 3]      | 1              | index of the medium below the film               |
 | sigma_a    | 0.7        | [0, inf)    | 1/depth unit   | absorption coefficient, per wavelength           |
 | depth      | 2.0        | [0, inf)    | "nm" (thesis)  | absorbing-layer thickness delta_1 (*)            |
 | kd         | 0.3        | [0, 1]      | 1              | albedo of the diffuse reflector, per wavelength  |
-| absorption | "product"  | product, beer_sum | -        | Eq. 3.6 as printed, or the Beer double pass     |
+| absorption | "product"  | product, beer_sum | -        | Padrón Eq. 3.6 as printed, or the Beer double pass |
 | underside  | "top"      | top, airy   | -              | film reflectance seen from below (D14)           |
 | color      | "rgb3"     | rgb3, cie, spectral | -      | output bands                                     |
 | wavelengths| (650, 510, 475) | > 0    | nm             | wavelengths of the "spectral" mode               |
 | n_nodes    | 48         | [8, 1024]   | -              | quadrature nodes of the Nyström solve            |
 
-Defaults: the thesis' Sec. 3.5.2 values (eta_1 = 1.56, sigma_a = 0.7, delta_1 = 2,
-delta_0 = 900 nm of Fig. 3.6(c)) with k_d = 0.3 (the diffuse baseline of Fig. 3.6(a)) so
-that the layer is visible; the thesis' own figures use k_d = 0 (Q-S5). (*) Only the
-optical depth sigma_a delta_1 enters. n_nodes = 48 agrees
-with 512 nodes to ~2e-11 (relative) for the defaults, both absorption forms. The spec's M26
-check table is reproduced to its 4 printed digits (two entries of it are double-rounded:
-0.005847 printed 0.0059, 0.007647 printed 0.0077).
+Defaults: the values of Padrón Sec. 3.5.2 (eta_1 = 1.56, sigma_a = 0.7, delta_1 = 2,
+delta_0 = 900 nm of Padrón Fig. 3.6(c)) with k_d = 0.3 (the diffuse baseline of Padrón
+Fig. 3.6(a)) so that the layer is visible. (*) Only the optical depth sigma_a delta_1 enters.
 
 Public functions: ``eval`` / ``sample`` / ``pdf`` (the model protocol, non-delta part),
 :func:`specular` (delta weight), :func:`albedo` (directional albedo of f_d),
@@ -122,9 +92,8 @@ path tracer) and :func:`eval_mc`, an independent position-free random walk (next
 estimation at every bottom vertex, cosine-sampled bounces, the underside reflection taken
 as a weight or by Russian roulette) that returns the estimate of f_d and its standard error.
 
-Cost note: each traced ``airy`` call and the solve cost XLA compile time (~0.5 s each), so
-the kernels evaluate all the film reflectances they need (nodes and directions) in one
-``airy`` call when the film parameters are scalars.
+Measured accuracy of the quadrature, the decisions (D14, Q-S5) and their history, cost
+notes: docs/thin_films.md.
 
 Example::
 
@@ -272,7 +241,7 @@ def _tiny(dtype):
 
 
 def _f1(absorption: str, kd, tau, mu_a, mu_b):
-    """Eq. 3.6 (or the Beer double pass) for positive cosines; everything broadcasts."""
+    """Padrón Eq. 3.6 (or the Beer double pass) for positive cosines; everything broadcasts."""
     dt = jnp.result_type(mu_a, mu_b, float)
     t = _tiny(dt)
     if absorption == "product":
@@ -571,16 +540,16 @@ def eval_mc(params: Params, wi: Vec3, wo: Vec3, key, n_paths: int = 4096, max_bo
 
 
 PRESETS = {
-    # Table 3.1 [T:480-489]: eta_0 = 1, eta_1 = 1.53; the table prints no delta_0, eta_2 or
-    # k_d: delta_0 = 900 nm and eta_2 = 1 from Fig. 3.6(c), sigma_a = 0.7, delta_1 = 2 and
-    # k_d = 0 from Sec. 3.5.2 (so f_d = 0: Q-S5)
+    # Padrón Table 3.1 [T:480-489]: eta_0 = 1, eta_1 = 1.53; the table prints no delta_0, eta_2 or
+    # k_d: delta_0 = 900 nm and eta_2 = 1 from Padrón Fig. 3.6(c), sigma_a = 0.7, delta_1 = 2 and
+    # k_d = 0 from Padrón Sec. 3.5.2 (so f_d = 0: Q-S5)
     "table_3_1": Params(thickness=900.0, eta0=1.0, eta1=1.53, eta2=1.0, sigma_a=0.7, depth=2.0, kd=0.0),
-    # Fig. 3.5 defaults [T:540, 547] (rows vary delta_0, columns eta_2; values not printed)
+    # Padrón Fig. 3.5 defaults [T:540, 547] (rows vary delta_0, columns eta_2; values not printed)
     "fig_3_5": Params(thickness=900.0, eta0=1.0, eta1=1.56, eta2=1.0, sigma_a=0.7, depth=2.0, kd=0.0),
-    # Fig. 3.6(a): the plain diffuse baseline k_d = 0.3, written as a film-less stack
+    # Padrón Fig. 3.6(a): the plain diffuse baseline k_d = 0.3, written as a film-less stack
     # (delta_0 = 0, eta_0 = eta_1 = eta_2 = 1 => R = 0, T = 1; sigma_a = 0 => f = k_d / pi)
     "fig_3_6a_diffuse": Params(thickness=0.0, eta0=1.0, eta1=1.0, eta2=1.0, sigma_a=0.0, depth=2.0, kd=0.3),
-    # Fig. 3.6(d) [T:550]: the film (smooth here; rough in the figure) with absorption and k_d = 0
+    # Padrón Fig. 3.6(d) [T:550]: the film (smooth here; rough in the figure) with absorption and k_d = 0
     "fig_3_6d": Params(thickness=900.0, eta0=1.0, eta1=1.56, eta2=1.0, sigma_a=0.7, depth=2.0, kd=0.0),
     # the configuration of the spec's M26 check table (= the defaults)
     "spec_m26_check": Params(),

@@ -5,7 +5,7 @@ non-absorbing) and a substrate eta_2 (a dielectric, or a conductor n + i k). Lig
 from the eta_0 side at angle theta_0. Per polarisation (s, p), with the signed complex
 interface amplitudes of :func:`~appearance_jax.optics.fresnel.interface_amplitudes`
 (written out again in real arithmetic inside :func:`airy`, its hot loop)
-(Yeh 2005; Belcour & Barla 2017; spec M10 of Padron 2025, which corrects the thesis):
+(Yeh 2005; Belcour & Barla 2017; spec M10 of Padrón 2025, which corrects the thesis):
 
     r = (r_01 + r_12 e^{i phi}) / (1 + r_01 r_12 e^{i phi})
     t = t_01 t_12 e^{i phi / 2} / (1 + r_01 r_12 e^{i phi})
@@ -20,10 +20,10 @@ absorbing films and substrates (complex q), total internal reflection inside the
 or at the substrate (imaginary q: frustrated TIR through a thin film is included, and
 T = 0 for a TIR substrate), and grazing incidence (r = -1, T = 0).
 
-Misprint in the thesis (Padron 2025, Eq. 3.1, [T:461] of seed 000): the expression
+Misprint in the thesis (Padrón Eq. 3.1, [T:461] of seed 000): the expression
 labelled I_R, with the prefactor n_2 cos theta_2 / (n_0 cos theta_0) and |t_01 t_12|^2 in
 the numerator, is the *transmittance* of a non-absorbing film; R = 1 - T there. The
-thesis' separate pi phase jumps (its Eq. 3.3) are automatic here because the amplitudes
+thesis' separate pi phase jumps (Padrón Eq. 3.3) are automatic here because the amplitudes
 carry their signs. For real indices R + T = 1 (tested to 1e-12 in float64).
 
 Power transmittance (Born & Wolf; tmm's convention): T_s = Re(q_2) / Re(q_0) |t_s|^2,
@@ -41,7 +41,7 @@ indices; outputs are complex amplitudes or real intensities.
 
 Wavelength-resolved colour (CIE integration, or the thesis' three wavelengths
 650/510/475 nm, [T:526]) is :func:`film_rgb`; :func:`color_chart` is a thickness x angle
-chart of the film's colour (Huang 2022, Fig. 3.3).
+chart of the film's colour (Huang Fig. 3.3).
 """
 
 from __future__ import annotations
@@ -379,7 +379,7 @@ def film_rgb(cos0, thickness_nm, eta0, eta1, eta2, *, mode: str = "cie", quantit
 def color_chart(thickness_nm, theta_deg, eta0=1.0, eta1=1.33, eta2=1.0, *, mode: str = "cie", **kw):
     """Encoded sRGB colours of a film over thickness x angle, ``(n_thickness, n_angle, 3)`` in [0, 1].
 
-    Huang 2022 Fig. 3.3 (seed 001, [T:519]): the colour bands bend towards larger
+    Huang Fig. 3.3 (seed 001, [T:519]): the colour bands bend towards larger
     thickness at oblique angles (the optical path difference 2 d eta_1 cos theta_1
     decreases with angle). Defaults: a free-standing soap film (eta_1 = 1.33). Linear
     colours are clipped to [0, 1] before encoding; keyword arguments go to :func:`film_rgb`.
