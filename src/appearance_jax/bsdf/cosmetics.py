@@ -2,12 +2,12 @@
 Lanza, Padrón-Griffé et al. 2024; seed-000 spec §2.2, M15, M16).
 
 Each cosmetic layer is an index-matched, laterally infinite slab of thickness ``t`` (base
-mean free paths) filled with spherical diffusers (two-lobe HG, Eq. 4.9) and SGGX platelets
-(specular microflakes, Eq. 4.10) with direction-dependent extinction and albedo (Eqs.
-4.3-4.8: :mod:`appearance_jax.layered.medium`). Below the layer lies a Lambertian base of
+mean free paths) filled with spherical diffusers (two-lobe HG, Padrón Eq. 4.9) and SGGX
+platelets (specular microflakes, Padrón Eq. 4.10) with direction-dependent extinction and
+albedo (Padrón Eqs. 4.3-4.8: :mod:`appearance_jax.layered.medium`). Below the layer lies a Lambertian base of
 albedo ``base_reflectance`` (0: the black matte polymer of the thesis' measurements [T:749])
 or, through :func:`eval_stack`, any BSDF of this library and any number of cosmetic layers
-(dewy over matte, Fig. 4.11).
+(dewy over matte, Padrón Fig. 4.11).
 
 The BSDF has no closed form: :func:`eval` runs the position-free random walk of
 :mod:`appearance_jax.mc.layered` and returns the estimate **and** its standard error. The
@@ -31,10 +31,10 @@ terms for the discrete choices, spec §6.4).
 Static settings: ``n_samples`` (paths per direction pair, 128 as in the thesis' fits
 [T:774]), ``max_bounces`` (steps of the walk; the thesis used up to 512 [T:774]; the energy
 lost to truncation is reported in tests/mc/test_layered_walk.py), ``azimuth`` ("fixed": the
-sample as given, tilt axis x; "averaged": the sample rotated uniformly about the normal,
-decision D4 for in-plane measurements of tilted platelets).
+sample as given, tilt axis x; "averaged": the sample rotated uniformly about the normal, for
+in-plane measurements of tilted platelets, decision D4).
 
-Presets: ``dewy1``, ``dewy2``, ``matte1``, ``matte2``: Table A.1 [T:1202-1213] (t = 16,
+Presets: ``dewy1``, ``dewy2``, ``matte1``, ``matte2``: Padrón Table A.1 [T:1202-1213] (t = 16,
 black base; theta_p converted from degrees). The thesis' fitted RGB values are linear RGB.
 
 Example::
@@ -45,6 +45,8 @@ Example::
     p = cosmetics.PRESETS["dewy1"]
     wi, wo = in_plane_directions(jnp.deg2rad(30.0), jnp.deg2rad(30.0))   # mirror direction
     f, se = cosmetics.eval(p, wi, wo, key=jax.random.key(0))             # (3,), (3,) in 1/sr
+
+Decisions and their history, validation: docs/cosmetics.md.
 """
 
 from __future__ import annotations
@@ -70,7 +72,7 @@ N_BANDS = 3
 
 @params_class
 class Params(medium.Params):
-    """Table 4.1: the medium's fields (:class:`appearance_jax.layered.medium.Params`: c_d, albedo_d,
+    """Padrón Table 4.1: the medium's fields (:class:`appearance_jax.layered.medium.Params`: c_d, albedo_d,
     albedo_p, w_g, g1, g2, alpha, theta), the layer thickness and the base."""
 
     thickness: Real = param(16.0, lo=0.0, hi=1e3, unit="mfp", doc="layer thickness t in base mean free paths")
@@ -158,7 +160,7 @@ def eval_stack(layers: Sequence[Params], wi: Vec3, wo: Vec3, key=None, *, base=N
 
 
 _DEG = math.pi / 180.0
-#: Table A.1 of Padrón 2025 [T:1202-1213] (verbatim; theta_p in degrees; t = 16)
+#: Padrón Table A.1 [T:1202-1213] (verbatim; theta_p in degrees; t = 16)
 TABLE_A1 = {
     "dewy1": dict(alpha=0.13, theta=1.47, albedo_p=(0.75, 0.85, 0.99), c_d=0.90, albedo_d=(0.99, 0.98, 0.95),
                   g1=0.55, g2=0.09, w_g=1.0, thickness=16.0),
