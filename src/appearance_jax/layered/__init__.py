@@ -1,7 +1,7 @@
 """Plane-parallel layered media: the cosmetic medium (M15) and deterministic references.
 
 - :mod:`.medium`: the anisotropic medium of the cosmetic foundations (diffusers + SGGX
-  platelets; Eqs. 4.3-4.10, Padrón 2025): extinction, albedo, phase function, collision kernel.
+  platelets; Padrón Eqs. 4.3-4.10): extinction, albedo, phase function, collision kernel.
 - :mod:`.single_scattering`: the closed-form single-scattering BRDF of a slab (spec M35).
 - :mod:`.h_function`: Chandrasekhar's H-function, semi-infinite isotropic media (spec M34).
 - :mod:`.adding_doubling`: adding-doubling solver for stacks of HG-mixture slabs over a

@@ -1,17 +1,18 @@
 """The cosmetic medium: spherical diffusers and SGGX platelets in one slab (Ch. 4, Padrón 2025;
 seed-000 spec M15).
 
-Extinction, albedo and phase function of the anisotropic RTE (Eq. 4.2), with the base
+Extinction, albedo and phase function of the anisotropic RTE (Padrón Eq. 4.2), with the base
 extinction ``sigma_base = 1`` (thicknesses are in base mean free paths, [T:774, 804]):
 
-    sigma_t(w) = c_d + (1 - c_d) C(w)                                           (Eq. 4.5)
-    Lambda(w)  = (Lambda_d c_d + Lambda_p (1 - c_d) C(w)) / sigma_t(w)          (Eq. 4.7)
+    sigma_t(w) = c_d + (1 - c_d) C(w)                                    (Padrón Eq. 4.5)
+    Lambda(w)  = (Lambda_d c_d + Lambda_p (1 - c_d) C(w)) / sigma_t(w)   (Padrón Eq. 4.7)
     f(w -> wo) = (Lambda_d c_d f_d + Lambda_p (1 - c_d) C(w) f_p)
-                 / (Lambda_d c_d + Lambda_p (1 - c_d) C(w))                      (Eq. 4.8)
+                 / (Lambda_d c_d + Lambda_p (1 - c_d) C(w))               (Padrón Eq. 4.8)
 
 ``C(w)`` = Ĉ_p(w) is the platelets' normalised projected area, the SGGX sigma(w) of
 :func:`appearance_jax.phase.sggx_flakes.sigma` (max 1 along the mean flake normal); ``f_d`` is
-the two-lobe HG mixture (Eq. 4.9) and ``f_p`` the specular flake phase function (Eq. 4.10).
+the two-lobe HG mixture (Padrón Eq. 4.9) and ``f_p`` the specular flake phase function
+(Padrón Eq. 4.10).
 Both directions point away from the scattering point; light travels along ``d = -wi`` and C
 is even, so the direction "seen" by the light is immaterial (decision D5).
 
@@ -31,9 +32,8 @@ one-sample mixture estimate ``Lambda f(wi -> wo) / pdf_q(wo)`` with
 direction (spec §6.4, "discrete choices"): in value it is the colour-mixed albedo (exactly 1
 for white media, so a white furnace conserves energy path by path); its derivative carries
 the score terms, and because every lobe has full support it stays unbiased even at the
-bounds (w_g = 1, c_d = 1), where one branch is never sampled. (Defensive sampling of the
-never-used branch, tried first, made long walks heavy-tailed: a 5 % chance of weight 0 per
-collision compensated by 1/0.95 lost ~17 % of the energy of a 500-step walk in practice.)
+bounds (w_g = 1, c_d = 1), where one branch is never sampled (why not defensive sampling:
+docs/cosmetics.md).
 Directions are reparameterised samples, smooth in g1, g2, alpha and theta; the mixture
 density keeps its dependence on them, as a reparameterised estimator requires.
 
@@ -87,12 +87,12 @@ BAND_FIELDS = ("albedo_d", "albedo_p")
 
 
 def platelet_area(m, w: Vec3):
-    """Ĉ_p(w) = sigma(w) = sqrt(alpha^2 + (1 - alpha^2)(w . w3)^2) in [alpha, 1] (Eq. 4.6, spec M14)."""
+    """Ĉ_p(w) = sigma(w) = sqrt(alpha^2 + (1 - alpha^2)(w . w3)^2) in [alpha, 1] (Padrón Eq. 4.6, spec M14)."""
     return sggx.flake_projected_area(m.alpha, sggx.mean_normal(m.theta), w)
 
 
 def extinction(m, w: Vec3):
-    """sigma_t(w) / sigma_base = c_d + (1 - c_d) Ĉ_p(w), Eq. 4.5 (even in w)."""
+    """sigma_t(w) / sigma_base = c_d + (1 - c_d) Ĉ_p(w), Padrón Eq. 4.5 (even in w)."""
     return m.c_d + (1.0 - m.c_d) * platelet_area(m, w)
 
 
@@ -103,14 +103,14 @@ def platelet_probability(m, w: Vec3):
 
 
 def albedo(m, w: Vec3):
-    """Lambda(w), Eq. 4.7, with a trailing bands axis."""
+    """Lambda(w), Padrón Eq. 4.7, with a trailing bands axis."""
     a = with_bands((1.0 - m.c_d) * platelet_area(m, w))
     cd = with_bands(m.c_d)
     return (jnp.asarray(m.albedo_d) * cd + jnp.asarray(m.albedo_p) * a) / (cd + a)
 
 
 def diffuser_phase(m, wi: Vec3, wo: Vec3):
-    """f_d(wi, wo), the two-lobe HG mixture of Eq. 4.9 [1/sr] (no bands axis)."""
+    """f_d(wi, wo), the two-lobe HG mixture of Padrón Eq. 4.9 [1/sr] (no bands axis)."""
     return mixture_value(m.w_g, m.g1, m.g2, dot(wi, wo))
 
 
@@ -134,7 +134,7 @@ def scattering(m, wi: Vec3, wo: Vec3):
 
 
 def phase(m, wi: Vec3, wo: Vec3):
-    """f(wi -> wo) of Eq. 4.8 [1/sr], bands last; normalised over wo for every wi."""
+    """f(wi -> wo) of Padrón Eq. 4.8 [1/sr], bands last; normalised over wo for every wi."""
     return scattering(m, wi, wo) / albedo(m, wi)
 
 

@@ -1,5 +1,5 @@
 """Closed-form single scattering of an index-matched slab (seed-000 spec M35, derived from the
-RTE with the cosmetic medium of Eqs. 4.3-4.10, Padrón 2025).
+RTE with the cosmetic medium of Padrón Eqs. 4.3-4.10).
 
 For collimated light from wi on a slab of thickness t (in base mean free paths, sigma_base
 = 1) over nothing, the once-scattered light leaving towards wo is
@@ -10,7 +10,7 @@ For collimated light from wi on a slab of thickness t (in base mean free paths, 
 
 (integrate the collision density sigma_t(wi)/mu_i exp(-sigma_t(wi) z / mu_i) over depth z
 against the scattering Lambda f and the escape exp(-sigma_t(wo) z / mu_o)). It is
-reciprocal because sigma_s f is (Eq. 4.8 discussion, [T:710]) and is the first-order term
+reciprocal because sigma_s f is (Padrón Eq. 4.8 discussion, [T:710]) and is the first-order term
 of the random walk :func:`appearance_jax.mc.layered.walk` (checked in tests/mc). For pure
 platelets aligned with the normal and t -> infinity it tends to Lambda_p D(wh) / (8 mu_i mu_o).
 """
