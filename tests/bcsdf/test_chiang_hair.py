@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import scipy.special as sps
 
-from appearance_jax import testing
+from appearance_jax import flatland, testing
 from appearance_jax.bcsdf import chiang, fiber
 from appearance_jax.core.frame import fiber_direction
 from appearance_jax.core.quadrature import gauss_legendre
@@ -142,6 +142,37 @@ def test_direction_kernel_equals_angle_formulas():
         assert np.allclose(N[:3], np.asarray(N_ref), rtol=1e-9, atol=1e-12)
         assert np.allclose(A, np.asarray(fiber.smooth_attenuation(h, ti, 1.55, chiang.as_bands(p.sigma_a), 3)),
                            rtol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------
+# absorption, checked without an oracle program
+
+
+@pytest.mark.parametrize("theta_i", [0.0, 0.6, -1.1])
+def test_absorbing_attenuations_match_flatland_and_closed_form(theta_i):
+    """sigma_a > 0 (the M18 table has none): the attenuations that eval uses (chiang.lobes' A_p of
+    R, TT, TRT and the residual) equal the flatland tracer's per-lobe powers of a smooth absorbing
+    cylinder at the same offsets h (Fresnel at every event, Beer-Lambert along each traced 3D
+    chord), and the closed form written out here (Chiang 2016 Eqs. 3-6): A_0 = f, A_1 = (1 - f)^2 T,
+    A_2 = (1 - f)^2 T^2 f, T = exp(-sigma_a 2 cos(gamma_t) / cos(theta_t)), gamma_t = asin(h / eta'),
+    with f the tracer's first reflection. A wrong power of T or a missing f in one lobe fails here,
+    without the Mitsuba comparison (tests/validation/test_mitsuba_hair.py, skipped without mitsuba)."""
+    eta, sig = 1.55, np.array([0.2, 0.5, 1.5])
+    sl = flatland.smooth_lobes(flatland.fiber(eta, tuple(sig)), fiber_direction(theta_i, 0.0), n_h=32,
+                               max_events=64)  # enough events that the tracer's tail of the residual lobe is negligible
+    h, lobe, power = np.asarray(sl.h), np.clip(np.asarray(sl.lobe), 0, 3), np.asarray(sl.power)
+    ref = np.stack([np.sum(np.where((lobe == p)[..., None], power, 0.0), axis=0) for p in range(4)])
+    n = h.size
+    wi = _dirs(np.full(n, theta_i), np.zeros(n))
+    wo = _dirs(np.full(n, -theta_i), np.full(n, 1.0))  # A_p depends on wi and h only
+    A = np.asarray(chiang.lobes(chiang.Params(eta=eta, sigma_a=tuple(sig), alpha=0.0), wi, wo, h=jnp.asarray(h))[0])
+    np.testing.assert_allclose(A, ref, rtol=1e-9, atol=1e-14)
+    s, c = np.sin(theta_i), np.cos(theta_i)
+    cos_gt = np.sqrt(1.0 - (h * c / np.sqrt(eta ** 2 - s ** 2)) ** 2)[:, None]
+    T = np.exp(-sig * 2.0 * cos_gt / np.sqrt(1.0 - (s / eta) ** 2))
+    f = ref[0]
+    assert np.all(T < 0.95) and np.all(f > 0.03)  # both factors matter at every node
+    np.testing.assert_allclose(A[:3], [f, (1 - f) ** 2 * T, (1 - f) ** 2 * T ** 2 * f], rtol=1e-9, atol=1e-14)
 
 
 # ------------------------------------------------------------------------------------------
