@@ -1,4 +1,4 @@
-"""Henyey-Greenstein phase function (Eq. C.2, Padrón 2025; Henyey & Greenstein 1941).
+"""Henyey-Greenstein phase function (Padrón Eq. C.2; Henyey & Greenstein 1941).
 
     f_HG(wi, wo) = 1/(4 pi) * (1 - g^2) / (1 + g^2 + 2 g cos)^(3/2),   cos = wi . wo    [1/sr]
 
@@ -70,7 +70,7 @@ class Params:
 
 
 def hg_value(g, cos_wi_wo):
-    """f_HG for asymmetry ``g`` and ``cos = wi . wo`` (both pointing away), Eq. C.2 [1/sr].
+    """f_HG for asymmetry ``g`` and ``cos = wi . wo`` (both pointing away), Padrón Eq. C.2 [1/sr].
 
     Broadcasts ``g`` against ``cos``. ``1 + g^2 + 2 g cos >= (1 - |g|)^2 > 0`` for |g| < 1,
     so no guard is needed; ``cos`` is clipped to [-1, 1] because a dot product of

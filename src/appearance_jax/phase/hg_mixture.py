@@ -1,10 +1,10 @@
-"""Two-lobe Henyey-Greenstein mixture (Eq. 4.9, Padrón 2025; seed-000 spec M13).
+"""Two-lobe Henyey-Greenstein mixture (Padrón Eq. 4.9; seed-000 spec M13).
 
     f(wi, wo) = w_g f_HG(wi, wo | g1) + (1 - w_g) f_HG(wi, wo | g2)        [1/sr]
 
-with f_HG of :mod:`appearance_jax.phase.henyey_greenstein` (Eq. C.2; both directions
+with f_HG of :mod:`appearance_jax.phase.henyey_greenstein` (Padrón Eq. C.2; both directions
 point away from the scatterer, g > 0 scatters forward, towards wo = -wi). The phase
-function of the cosmetic diffusers (Ch. 4; fitted values in Table A.1), motivated by
+function of the cosmetic diffusers (Padrón Ch. 4; fitted values in Padrón Table A.1), motivated by
 measured TiO2 colloids: a forward and a backward lobe. ``w_g = 1`` is the single lobe
 HG(g1). Normalised (integrates to 1 over the sphere) for every parameter value.
 
@@ -14,7 +14,7 @@ HG(g1). Normalised (integrates to 1 over the sphere) for every parameter value.
 | g1        | 0.5     | (-1, 1) | 1    | asymmetry of lobe 1 (mean cosine), per band |
 | g2        | -0.3    | (-1, 1) | 1    | asymmetry of lobe 2 (mean cosine), per band |
 
-Presets: the diffuser lobes of the four foundations of Table A.1 (``dewy1`` ... ``matte2``).
+Presets: the diffuser lobes of the four foundations of Padrón Table A.1 (``dewy1`` ... ``matte2``).
 
 Sampling (spec M13/M27): one uniform picks the lobe, lobe 1 with probability w_g, and is
 then rescaled to [0, 1) and reused for the HG inversion of that lobe ("Shirley's
@@ -63,7 +63,7 @@ class Params:
 
 
 def mixture_value(w, g1, g2, cos_wi_wo):
-    """Eq. 4.9: ``w f_HG(g1) + (1 - w) f_HG(g2)`` at ``cos = wi . wo`` [1/sr] (broadcasts)."""
+    """Padrón Eq. 4.9: ``w f_HG(g1) + (1 - w) f_HG(g2)`` at ``cos = wi . wo`` [1/sr] (broadcasts)."""
     return w * hg_value(g1, cos_wi_wo) + (1.0 - w) * hg_value(g2, cos_wi_wo)
 
 
@@ -103,7 +103,7 @@ eval = boundary(_eval, Params)
 pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 
-# Table A.1 of Padrón 2025 (diffuser lobes of the four fitted foundations, [T:1202-1213])
+# Padrón Table A.1 (diffuser lobes of the four fitted foundations, [T:1202-1213])
 PRESETS = {
     "dewy1": dict(w_g=1.0, g1=0.55, g2=0.09),
     "dewy2": dict(w_g=0.79, g1=0.77, g2=-0.23),

@@ -1,4 +1,4 @@
-"""Specular SGGX microflake phase function of the cosmetic platelets (Eq. 4.10, Padrón 2025;
+"""Specular SGGX microflake phase function of the cosmetic platelets (Padrón Eq. 4.10;
 SGGX: Heitz, Dupuy, Crassin & Dachsbacher 2015; seed-000 spec M14).
 
     f_p(wi, wo) = D(wh) / (4 sigma(wi)),   wh = (wi + wo) / |wi + wo|              [1/sr]
@@ -12,7 +12,7 @@ reflective flakes; the albedo Lambda_p is applied by the caller (the cosmetic me
 Conventions: both wi and wo point **away** from the scattering point (light travels along
 d = -wi). The thesis' normalised projected area Ĉ_p(w) = C_p(w) / max C_p equals sigma(w)
 here because max_w sigma = 1 (along w3): :func:`sigma` is that Ĉ_p, the directional factor of
-the platelet extinction (Eq. 4.5).
+the platelet extinction (Padrón Eq. 4.5).
 
 Properties: f_p integrates to 1 over the sphere (it is a phase function, no cosine);
 it is **not** symmetric in (wi, wo) (``Model.reciprocal = False``), but
@@ -26,7 +26,7 @@ the density is exactly f_p, so ``weight = f / pdf = 1`` (0 for a failed sample).
 | alpha     | 0.3     | (0, 1]     | 1    | platelet roughness alpha_p (flake thickness / width; 1 = isotropic) |
 | theta     | 0.0     | [0, pi/2]  | rad  | tilt theta_p of the mean flake normal about the tangent x  |
 
-Table A.1 of the thesis (seeds/000 [T:1203-1204]; spec §2.2.4) gives theta_p in **degrees**;
+Padrón Table A.1 (seeds/000 [T:1203-1204]; spec §2.2.4) gives theta_p in **degrees**;
 the presets below are converted to radians. Accuracy: the sampler uses the generic SGGX
 formulas (see :mod:`appearance_jax.microfacet.sggx`); in float64 they are accurate down to
 alpha = 1e-3 (the ``dewy2`` preset has alpha = 0.002); in float32 prefer alpha >= 0.03.
@@ -109,7 +109,7 @@ pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 
 _DEG = math.pi / 180.0
-#: Table A.1 (seeds/000 [T:1203-1204], spec §2.2.4): (alpha_p, theta_p in degrees)
+#: Padrón Table A.1 (seeds/000 [T:1203-1204], spec §2.2.4): (alpha_p, theta_p in degrees)
 TABLE_A1 = {"dewy1": (0.13, 1.47), "dewy2": (0.002, 5.5), "matte1": (0.15, 2.01), "matte2": (0.49, 52.2)}
 PRESETS = {k: dict(alpha=a, theta=t * _DEG) for k, (a, t) in TABLE_A1.items()}
 
