@@ -1,6 +1,8 @@
 """Name -> model: the one list that the CLI, the fitters and the property tests read.
 
-A model module ends with a ``MODEL = Model(...)`` record; add its import below.
+The registry is the layer above every model: it imports the model modules (a model never
+imports the registry) and lists their ``MODEL`` records. A new model module ends with a
+``MODEL = Model(...)`` record; add it to ``_MODELS`` below.
 
 Composite BSDFs (sums of lobes, :mod:`appearance_jax.bsdf.sum`) are named by joining
 registered BSDF names with ``+``: ``get("rough_conductor+lambert")``. Those in
@@ -12,24 +14,30 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 
 from __future__ import annotations
 
+from .bcsdf import chiang, huang, marschner, sadeghi, thread
+from .bsdf import cloth, cosmetics, iridescent, lambert, rough_conductor, rough_dielectric, rough_plastic, snake
+from .bsdf.sum import sum_model
 from .core.model import Model
+from .phase import henyey_greenstein, hg_mixture, sggx_flakes
 
-_MODULES = (
-    "appearance_jax.bsdf.lambert",
-    "appearance_jax.bsdf.rough_conductor",
-    "appearance_jax.bsdf.rough_dielectric",
-    "appearance_jax.bsdf.rough_plastic",
-    "appearance_jax.bsdf.iridescent",
-    "appearance_jax.bsdf.snake",
-    "appearance_jax.bsdf.cosmetics",
-    "appearance_jax.bsdf.cloth",
-    "appearance_jax.phase.henyey_greenstein",
-    "appearance_jax.phase.hg_mixture",
-    "appearance_jax.phase.sggx_flakes",
-    "appearance_jax.bcsdf.chiang",
-    "appearance_jax.bcsdf.marschner",
-    "appearance_jax.bcsdf.sadeghi",
-    "appearance_jax.bcsdf.huang",
+_MODELS: tuple[Model, ...] = (
+    lambert.MODEL,
+    rough_conductor.MODEL,
+    rough_dielectric.MODEL,
+    rough_plastic.MODEL,
+    iridescent.MODEL,
+    snake.MODEL,
+    cosmetics.MODEL,
+    cloth.MODEL,
+    cloth.weaves.MODEL,
+    henyey_greenstein.MODEL,
+    hg_mixture.MODEL,
+    sggx_flakes.MODEL,
+    chiang.MODEL,
+    marschner.MODEL,
+    sadeghi.MODEL,
+    huang.MODEL,
+    thread.MODEL,
 )
 
 # listed sums of lobes: Cook-Torrance specular + diffuse (the classical baseline for fitting
@@ -43,23 +51,36 @@ _REGISTRY: dict[str, Model] | None = None
 _BUILT: dict[str, Model] = {}  # composites built on demand by get()
 
 
+def _composite_params(name: str, values: dict):
+    """Unpickle a composite's parameters: the registry's class of that name (see ``sum_model``)."""
+    return get(name).Params(**values)
+
+
+def _parse_sum(name: str) -> list[str]:
+    """The component names of ``"a + b"`` (whitespace around the parts ignored)."""
+    return [part.strip() for part in name.split("+")]
+
+
+def _build_sum(parts: list[str], reg: dict[str, Model], whole: str) -> Model:
+    for part in parts:
+        if part not in reg or "+" in part:
+            raise _unknown(part, reg, whole)
+    key = "+".join(parts)
+    return sum_model(*(reg[part] for part in parts), name=key, rebuild=_composite_params)
+
+
 def _load() -> dict[str, Model]:
     global _REGISTRY
     if _REGISTRY is None:
-        import importlib
-
-        from .bsdf.sum import sum_model
-
         reg: dict[str, Model] = {}
-        for mod_name in _MODULES:
-            model = importlib.import_module(mod_name).MODEL
+        for model in _MODELS:
             if model.name in reg:
-                raise RuntimeError(f"duplicate model name {model.name!r} in {mod_name}")
+                raise RuntimeError(f"duplicate model name {model.name!r} in registry._MODELS")
             reg[model.name] = model
         for name in _COMPOSITES:
             if name in reg:
                 raise RuntimeError(f"duplicate model name {name!r} in registry._COMPOSITES")
-            reg[name] = sum_model(*(reg[part] for part in name.split("+")), name=name)
+            reg[name] = _build_sum(_parse_sum(name), reg, name)
         _REGISTRY = reg
     return _REGISTRY
 
@@ -81,23 +102,20 @@ def get(name: str) -> Model:
         return reg[name]
     if not isinstance(name, str) or "+" not in name:
         raise _unknown(name, reg)
-    parts = [part.strip() for part in name.split("+")]
+    parts = _parse_sum(name)
     key = "+".join(parts)
     if key in reg:
         return reg[key]
     if key not in _BUILT:
-        for part in parts:
-            if part not in reg or "+" in part:
-                raise _unknown(part, reg, name)
-        from .bsdf.sum import sum_model
-
-        _BUILT[key] = sum_model(*(reg[part] for part in parts), name=key)
+        _BUILT[key] = _build_sum(parts, reg, name)
     return _BUILT[key]
 
 
 def names() -> list[str]:
+    """The listed model names (registered models and the listed composites), in registry order."""
     return list(_load())
 
 
 def models() -> list[Model]:
+    """The listed models, in registry order."""
     return list(_load().values())

@@ -101,7 +101,7 @@ def test_fixing_values_reproduces_each_component():
 def test_field_union_and_collision_prefix_rule():
     assert list(CL.Params.__dataclass_fields__) == [
         "alpha", "alpha_v", "eta", "k", "specular_reflectance", "distribution", "shadowing", "reflectance"]
-    m = sum_model("rough_conductor", "rough_plastic")
+    m = sum_model(registry.get("rough_conductor"), registry.get("rough_plastic"))
     names = list(m.Params.__dataclass_fields__)
     # rough_plastic (component 1) loses alpha, specular_reflectance, eta, distribution, shadowing
     assert names == ["alpha", "alpha_v", "eta", "k", "specular_reflectance", "distribution", "shadowing",
@@ -117,9 +117,9 @@ def test_field_union_and_collision_prefix_rule():
     assert param_specs(m.Params)["rough_plastic_1_eta"] == param_specs(rough_plastic.Params)["eta"]
     assert m.Params.__dataclass_fields__["rough_plastic_1_eta"].default == 1.5
     # the index is the position in the sum; non-identifier characters of a nested sum's name -> "_"
-    m3 = sum_model("lambert", CL)
+    m3 = sum_model(registry.get("lambert"), CL)
     assert list(m3.Params.__dataclass_fields__)[-1] == "rough_conductor_lambert_1_reflectance"
-    m4 = sum_model("lambert", "rough_conductor", "lambert")
+    m4 = sum_model(registry.get("lambert"), registry.get("rough_conductor"), registry.get("lambert"))
     assert list(m4.Params.__dataclass_fields__)[-1] == "lambert_2_reflectance"
     assert m4.name == "lambert+rough_conductor+lambert"
 
@@ -143,7 +143,7 @@ def test_params_pickle_through_the_registry():
     q = pickle.loads(pickle.dumps(p))
     assert type(q) is CL.Params and float(q.alpha) == 0.3 and q.distribution == "ggx"
     np.testing.assert_array_equal(np.asarray(q.reflectance), [0.1, 0.2, 0.3])
-    custom = sum_model("lambert", "lambert", name="custom_two_lamberts")
+    custom = sum_model(registry.get("lambert"), registry.get("lambert"), name="custom_two_lamberts")
     assert type(copy.deepcopy(custom.Params())) is custom.Params
     with pytest.raises(pickle.PicklingError):
         pickle.dumps(custom.Params())
@@ -241,7 +241,7 @@ def test_sample_with_uniforms_picks_the_lobe():
 
 def test_a_component_without_sampler_gives_a_composite_without_sampler():
     no_sampler = dataclasses.replace(LAM, name="lambert_eval_only", sample=None, pdf=None)
-    m = sum_model("rough_conductor", no_sampler)
+    m = sum_model(registry.get("rough_conductor"), no_sampler)
     assert m.sample is None and m.pdf is None
     assert m.Params.__dataclass_fields__["reflectance"]
     _close(m.eval(m.Params(), WI, WO), CL.eval(CL.Params(), WI, WO))
@@ -253,7 +253,7 @@ def test_flags_summary_presets():
     assert "Cook & Torrance 1982" in CL.source and "Lambert (1760)" in CL.source
     md = registry.get("rough_dielectric+lambert")
     assert md.transmissive and not md.reciprocal
-    m = sum_model("lambert", "lambert", name="two_lamberts", presets={"grey": None})
+    m = sum_model(registry.get("lambert"), registry.get("lambert"), name="two_lamberts", presets={"grey": None})
     assert m.name == "two_lamberts" and list(m.presets) == ["grey"]
 
 
@@ -273,15 +273,17 @@ def test_registry_lists_and_caches_composites():
 
 def test_non_bsdf_component_is_rejected():
     with pytest.raises(ValueError, match="component 'henyey_greenstein' is a phase model; only BSDFs"):
-        sum_model("rough_conductor", "henyey_greenstein")
+        sum_model(registry.get("rough_conductor"), registry.get("henyey_greenstein"))
     with pytest.raises(ValueError, match="component 'hg_mixture' is a phase model"):
         registry.get("lambert+hg_mixture")
-    with pytest.raises(ValueError, match="neither a registered model name nor a Model record"):
-        sum_model("lambert", 3)
+    with pytest.raises(ValueError, match="is not a Model record"):
+        sum_model(registry.get("lambert"), 3)
+    with pytest.raises(ValueError, match="is not a Model record"):
+        sum_model("lambert", registry.get("lambert"))  # names are the registry's job
     with pytest.raises(ValueError, match="at least one component"):
         sum_model()
     with pytest.raises(ValueError, match="contain no '.'"):
-        sum_model("lambert", "lambert", name="a.b")
+        sum_model(registry.get("lambert"), registry.get("lambert"), name="a.b")
 
 
 def test_unknown_name_in_a_sum_lists_the_registered_models():
@@ -291,4 +293,4 @@ def test_unknown_name_in_a_sum_lists_the_registered_models():
     with pytest.raises(KeyError, match="unknown model ''"):
         registry.get("lambert+")
     with pytest.raises(KeyError, match="unknown model 'nope'"):
-        sum_model("nope", "lambert")
+        registry.get("nope+lambert")

@@ -57,7 +57,7 @@ import math
 
 import jax.numpy as jnp
 
-from ..core.model import as_bands, boundary
+from ..core.model import Model, as_bands, boundary
 from ..core.params import Bands, param, params_class, Real, static
 from ..core.special import safe_sqrt
 from ..core.vec import Vec3, dot
@@ -173,3 +173,25 @@ volume_term = boundary(_volume_term, Params)
 def linen() -> Params:
     """The Linen Plain thread of Table 5.2: eta 1.46, A = 0.3 (0.2, 0.8, 1.0), k_d 0.3, gamma 12/24 deg."""
     return Params(eta=1.46, albedo=(0.06, 0.24, 0.3), k_d=0.3, gamma_s=12.0, gamma_v=24.0)
+
+
+def _eval_fiber(p: Params, wi: Vec3, wo: Vec3):
+    # the fiber frame of appearance_jax.bcsdf: t = x, n = y, v = t x n = z
+    return from_dots(p, wi.x, wi.y, wi.z, wo.x, wo.y, wo.z)
+
+
+eval_fiber = boundary(_eval_fiber, Params)
+"""f_s in 1/sr (bands last) for directions in the fiber frame (x = thread tangent; Sadeghi Eq. 5.11)."""
+
+MODEL = Model(
+    name="cloth_thread",
+    kind="bcsdf",
+    Params=Params,
+    eval=eval_fiber,
+    sample=None,
+    pdf=None,
+    summary="Sadeghi's cloth thread: rough dielectric cylinder surface lobe + oriented volume scattering",
+    source="Sadeghi 2011 Sec. 5.5.3, Eqs. 5.6-5.11, Table 5.1",
+    reciprocal=True,
+    transmissive=True,
+)

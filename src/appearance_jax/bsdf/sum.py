@@ -13,7 +13,7 @@ record with its own ``Params`` class, validated ``eval``/``sample``/``pdf``, lis
     p = m.Params(alpha=0.2, specular_reflectance=0.5, reflectance=(0.3, 0.2, 0.1))
     f = m.eval(p, wi, wo)          # = rough_conductor f + lambert f, bands broadcast
 
-or, for a model that is not registered, :func:`sum_model` (components by name or Model record).
+or, for a model that is not registered, :func:`sum_model` (components as Model records).
 
 **Parameters.** ``Params`` is a params class generated at run time whose fields are the
 union of the components' fields, in component order, with the same metadata (default,
@@ -96,22 +96,18 @@ DEFENSIVE_FRACTION = 1e-3
 _RESERVED = frozenset({"split", "components", "field_map", "replace", "_validate", "__reduce_ex__"})
 
 
-def _resolve(component) -> Model:
-    if isinstance(component, str):
-        from .. import registry
-
-        model = registry.get(component)
-    elif isinstance(component, Model):
-        model = component
-    else:
+def _check_component(component) -> Model:
+    if not isinstance(component, Model):
         raise ValueError(
-            f"sum_model: component {component!r} is neither a registered model name nor a Model record"
+            f"sum_model: component {component!r} is not a Model record (names of registered models are "
+            "resolved by appearance_jax.registry.get('a+b'))"
         )
-    if model.kind != "bsdf":
+    if component.kind != "bsdf":
         raise ValueError(
-            f"sum_model: component {model.name!r} is a {model.kind} model; only BSDFs (kind 'bsdf') can be summed"
+            f"sum_model: component {component.name!r} is a {component.kind} model; only BSDFs (kind 'bsdf') "
+            "can be summed"
         )
-    return model
+    return component
 
 
 def _prefix(name: str, index: int) -> str:
@@ -159,7 +155,7 @@ def _component_field(composite_field: str, mapping) -> str:
     return composite_field
 
 
-def _make_params(name: str, models: list[Model]) -> type:
+def _make_params(name: str, models: list[Model], rebuild) -> type:
     """The composite's params class, labelled ``<name>.Params`` in validation errors and reprs."""
     fields, mapping = _field_plan(models)
     # each field keeps its component's annotation (Real, Bands, str, ...)
@@ -186,12 +182,13 @@ def _make_params(name: str, models: list[Model]) -> type:
                 raise ValueError(f"{name}.Params, component {k} ({m.name}){where}: {e}") from e
 
     def __reduce_ex__(self, protocol):
-        # pickle finds classes by module and name, which a generated class has not: a class
-        # that the registry serves under ``name`` is rebuilt from there (copy and deepcopy
-        # work for every composite; pickling one that is not in the registry fails)
-        if _registry_params(name) is type(self):
+        # pickle finds classes by module and name, which a generated class has not: whoever
+        # owns a named class (the registry) hands in ``rebuild(name, values)``, an importable
+        # function that returns its parameters (copy and deepcopy work for every composite;
+        # pickling one made without ``rebuild`` fails)
+        if rebuild is not None:
             values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-            return _params_from_registry, (name, values)
+            return rebuild, (name, values)
         return object.__reduce_ex__(self, protocol)
 
     # the class body a ``class Params:`` statement would produce, for params_class (not
@@ -208,22 +205,6 @@ def _make_params(name: str, models: list[Model]) -> type:
     ns["__qualname__"] = f"{name}.Params"
     cls = type("Params", (), ns)
     return params_class(cls)
-
-
-def _registry_params(name: str):
-    from .. import registry
-
-    try:
-        return registry.get(name).Params
-    except (KeyError, ValueError):
-        return None
-
-
-def _params_from_registry(name: str, values: dict):
-    """Unpickle a composite's parameters: the registry's class of that name."""
-    from .. import registry
-
-    return registry.get(name).Params(**values)
 
 
 def _band_mean(v):
@@ -263,21 +244,25 @@ def _select(index, options):
     return out
 
 
-def sum_model(*components, name: str | None = None, presets: Mapping[str, Any] | None = None) -> Model:
-    """A :class:`Model` whose BSDF is the sum of ``components`` (names or Model records of kind 'bsdf').
+def sum_model(*components: Model, name: str | None = None, presets: Mapping[str, Any] | None = None,
+              rebuild=None) -> Model:
+    """A :class:`Model` whose BSDF is the sum of ``components`` (Model records of kind 'bsdf').
 
     ``name`` defaults to the components' names joined by ``+``; it must not contain ``.``
     (validation errors are labelled ``<name>.Params.<field>``). Each call builds a new model
-    with a new ``Params`` class; :func:`appearance_jax.registry.get` (``"a+b"``) caches one
-    per name. See the module docstring for the parameter naming rule, sampling and flags.
+    with a new ``Params`` class; :func:`appearance_jax.registry.get` (``"a+b"``: names of
+    registered BSDFs) caches one per name. ``rebuild(name, values)``, an importable function
+    that returns this model's parameters from their field values, makes the generated
+    ``Params`` picklable (the registry passes one). See the module docstring for the
+    parameter naming rule, sampling and flags.
     """
     if not components:
         raise ValueError("sum_model: needs at least one component")
-    models = [_resolve(c) for c in components]
+    models = [_check_component(c) for c in components]
     name = "+".join(m.name for m in models) if name is None else name
     if not name or "." in name:
         raise ValueError(f"sum_model: name {name!r} must be non-empty and contain no '.'")
-    Params = _make_params(name, models)
+    Params = _make_params(name, models, rebuild)
 
     def _sum_eval(subs, wi, wo):
         out = models[0].eval.kernel(subs[0], wi, wo)
