@@ -69,6 +69,8 @@ Example::
     wi = fiber_direction(0.3, 0.0); wo = fiber_direction(-0.35, 2.5)
     S = chiang.eval(p, wi, wo, h=0.2)                                     # shape (3,), 1/sr
     S_far = chiang.eval(p.replace(far_field=True), wi, wo)                # h integrated out
+
+Validation (flatland, closed forms, Mitsuba 3's ``hair``): docs/hair.md.
 """
 
 from __future__ import annotations

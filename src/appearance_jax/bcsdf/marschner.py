@@ -1,11 +1,11 @@
 """Marschner et al. 2003 hair BCSDF: R, TT and TRT lobes of a smooth dielectric cylinder
 with tilted cuticle scales (Marschner, Jensen, Cammarano, Worley, Hanrahan 2003,
-"Light scattering from human hair fibers"; Eqs. 4.7-4.8, Sadeghi 2011; spec seed-002 §1.3.5).
+"Light scattering from human hair fibers"; Sadeghi Eqs. 4.7-4.8; spec seed-002 §1.3.5).
 
     S(wi, wo) = sum_{X in R, TT, TRT} M_X(theta_h) N_X(eta'(theta_d), phi) / cos^2(theta_d)
 
 - ``M_X = g(beta_X^2; theta_h - alpha_X)`` is a unit-integral Gaussian of variance beta_X^2
-  (Eq. 4.8), shifted by the cuticle tilt: alpha_R = alpha, alpha_TT = -alpha/2,
+  (Sadeghi Eq. 4.8), shifted by the cuticle tilt: alpha_R = alpha, alpha_TT = -alpha/2,
   alpha_TRT = -3 alpha/2; beta_TT = beta/2, beta_TRT = 2 beta (MJC03 Table 1) unless given.
 - ``N_p(phi) = sum_roots A(p, h) / |2 dPhi/dh|`` (MJC03 §4.2) with the exit azimuth
   Phi(p, h) = 2 p gamma_t - 2 gamma_i + p pi (:func:`fiber.exit_azimuth`), Bravais' index
@@ -28,28 +28,21 @@ with tilted cuticle scales (Marschner, Jensen, Cammarano, Worley, Hanrahan 2003,
   phi_h = (phi_i + phi_o)/2 is measured from the fiber frame's y axis; eta* is clamped
   to > 1 (extreme eta, a give eta* < 1).
 
-Decisions (static fields; defaults first):
+Decisions (static fields; defaults first; their reasons and history: docs/hair.md):
 
 - ``fresnel``: ``"bravais"`` (MJC03: (F_perp(eta') + F_par(eta''))/2 at the 2D angle
   gamma) | ``"exact"`` (unpolarised dielectric Fresnel at the true 3D angle,
-  cos = cos(theta_d) cos(gamma_i), true eta: what :mod:`appearance_jax.flatland` and
-  :func:`fiber.smooth_attenuation` use). They agree at theta_d = 0 and differ at grazing.
+  cos = cos(theta_d) cos(gamma_i), true eta, as :mod:`appearance_jax.flatland` uses).
 - ``chord``: ``"corrected"`` (T = exp(-sigma_a' 2 cos gamma_t), the chord of a unit circle;
   spec M18 / d'Eon et al. 2011) | ``"mjc03"`` (the printed T = exp(-2 sigma_a' (1 + cos 2
-  gamma_t)), twice the chord at h = 0). In both, sigma_a' = sigma_a / cos theta_t with
-  sin theta_t = sin theta_d / eta.
+  gamma_t))). In both, sigma_a' = sigma_a / cos theta_t with sin theta_t = sin theta_d / eta.
 - ``caustic``: ``"mjc03"`` (fade + glints) | ``"none"`` (the pure smooth-cylinder N_2).
-- ``fade``: ``"continuous"`` (t = 1 - smoothstep(2, 2 + Delta eta', eta'), so the glint
-  weight is continuous at eta' = 2: a fix, the literal form jumps from 1 to 0 there) |
-  ``"literal"`` (t = smoothstep(2, 2 + Delta eta', eta') as printed in the spec).
-
+- ``fade``: ``"continuous"`` (t = 1 - smoothstep(2, 2 + Delta eta', eta'), continuous at
+  eta' = 2) | ``"literal"`` (t = smoothstep(2, 2 + Delta eta', eta') as printed in the spec).
 - ``longitudinal``: ``"mjc03"`` (M_X = g(beta_X^2; theta_h - alpha_X), unit integral in
-  theta_h, as printed in MJC03 and Eq. 4.8) | ``"half"`` (M_X / 2). For a fixed theta_i,
-  d theta_h = d theta_o / 2, so the literal M integrates to 2 over theta_o: the smooth
-  limit is 2 delta(theta_i + theta_o) instead of MJC03's own delta(theta_i + theta_o)
-  = delta(2 theta_h) = delta(theta_h)/2, and the albedo of the literal model is about twice
-  the lobe albedos (measured: int S cos theta_o dw_o = 1.88 at sigma_a = 0, theta_i = 0).
-  ``"half"`` restores the smooth limit (albedo <= 1 up to the cos^2 theta_d approximation).
+  theta_h, as printed in MJC03 and Sadeghi Eq. 4.8; it integrates to 2 over theta_o) |
+  ``"half"`` (M_X / 2: the smooth limit delta(theta_i + theta_o), albedo <= 1 up to the
+  cos^2 theta_d approximation).
 
 Known limitation (d'Eon et al. 2011): a Gaussian in theta_h over cos^2 theta_d does not
 conserve energy exactly; there is no white-furnace identity for this model. No sampler
@@ -76,6 +69,8 @@ Example::
     from appearance_jax.core.frame import fiber_direction
     wi = fiber_direction(0.3, 0.0); wo = fiber_direction(-0.2, 2.5)
     S = marschner.eval(marschner.Params(), wi, wo)        # shape (3,), 1/sr
+
+Validation and the history of the decisions: docs/hair.md.
 """
 
 from __future__ import annotations
@@ -136,7 +131,7 @@ def lobe_shifts(p: Params):
 
 
 def gaussian(x, std):
-    """Unit-integral Gaussian g(std^2; x) (Eq. 4.8)."""
+    """Unit-integral Gaussian g(std^2; x) (Sadeghi Eq. 4.8)."""
     return jnp.exp(-0.5 * (x / std) ** 2) / (std * math.sqrt(2.0 * math.pi))
 
 

@@ -1,28 +1,28 @@
-"""Sadeghi's artist-friendly hair: single-scattering pseudo functions (Eqs. 4.9-4.16) and
-dual scattering for multiple scattering in a hair volume (§4.6.2, §4.7, Eqs. 4.18-4.37,
-Table 4.1, App. C; Sadeghi 2011, after Zinke et al. 2008). Spec seed-002 §1.3.7-1.3.10.
+"""Sadeghi's artist-friendly hair: single-scattering pseudo functions (Sadeghi Eqs. 4.9-4.16)
+and dual scattering for multiple scattering in a hair volume (Sadeghi 2011 §4.6.2, §4.7,
+Eqs. 4.18-4.37, Table 4.1, App. C, after Zinke et al. 2008). Spec seed-002 §1.3.7-1.3.10.
 
-Single scattering (Eqs. 4.9-4.16), with theta_h = (theta_i + theta_o)/2,
+Single scattering (Sadeghi Eqs. 4.9-4.16), with theta_h = (theta_i + theta_o)/2,
 theta_d = (theta_o - theta_i)/2 (Marschner's half/difference angles) and |phi| wrapped to
 [0, pi] (decision D-H9):
 
-    M'_X = g'(beta_X^2; theta_h - alpha_X)          unit *height* Gaussian (Eq. 4.9)
+    M'_X = g'(beta_X^2; theta_h - alpha_X)          unit *height* Gaussian (Sadeghi Eq. 4.9)
     N'_R = cos(phi/2)                                Kim's approximation, no Fresnel (4.10)
     N'_TT = g'(gamma_TT^2; pi - phi)                 (4.11)
     N'_TRT = cos(phi/2) + I_g g'(gamma_g^2; G_angle - phi)   (4.12-4.14)
     f'_s = sum_X C_X I_X M'_X N'_X / cos^2 theta_d   (4.15-4.16; not energy conserving)
 
-Dual scattering (Table 4.1 names). For the light inclination theta (decision D-H7: the
+Dual scattering (Sadeghi Table 4.1 names). For the light inclination theta (decision D-H7: the
 tables are indexed by theta_i) the tables are computed in JAX by Gauss-Legendre quadrature
-of the *normalized* single scattering f_s'^norm = f'_s / int f'_s cos theta_o dw_o (Eq. 4.17;
+of the *normalized* single scattering f_s'^norm = f'_s / int f'_s cos theta_o dw_o (Sadeghi Eq. 4.17;
 D-H4: per theta_i, measure cos theta_o dw_o, so a_f + a_b = 1) of the *multiple* parameter
 set: a_f / a_b (front |phi| > pi/2 / back |phi| < pi/2 attenuation, Zinke 2008 Eq. 6),
 alpha_f / alpha_b and beta_f / beta_b (lobe-weighted shifts and standard deviations,
-Eqs. 4.30-4.33), A_b (Eq. 4.27 with Zinke's cube, D-H1), Delta_b (4.28), sigma_b (4.29
+Sadeghi Eqs. 4.30-4.33), A_b (Sadeghi Eq. 4.27 with Zinke's cube, D-H1), Delta_b (4.28), sigma_b (4.29
 with sqrt(2 beta_f^2 + 3 beta_b^2), D-H2; the odd (2 beta_f + 3 beta_b) term in the
 denominator is kept as in the source) and N^G_X = (2/pi) int_{pi/2}^{pi} N'_X dphi (4.35,
 in closed form). a_f is clamped to <= 0.99 inside A_b, Delta_b, sigma_b (poles at 1).
-Then (§4.7.2 pseudo code, cleaned; D-H3 sigma_f^2 in the *scatter* back term):
+Then (Sadeghi §4.7.2 pseudo code, cleaned; D-H3 sigma_f^2 in the *scatter* back term):
 
     T_f = d_f a_f^n,  sigma_f^2 = beta_f^2 n                         (4.23-4.24)
     f_back^direct  = C_Back I_Back 2 A_b g(theta_h - Delta_b + alpha_Back, sigma_b^2 + beta_Back) / (pi cos^2 theta_d)
@@ -38,10 +38,10 @@ times cos theta_i (multiply by the light's curve irradiance as for any BCSDF). I
 (dimensionless, >= 0; the RSL's shadow opacity x hairs_that_cast_full_shadow, see
 :func:`from_shadow`), ``direct_fraction`` = 1 - shadow opacity in [0, 1]; or an explicit
 ``forward=(T_f, sigma_f^2)`` e.g. from :func:`forward_from_inclinations` (the exact
-alternative with the inclinations theta^k of the occluding hairs, Eqs. 4.19-4.22).
+alternative with the inclinations theta^k of the occluding hairs, Sadeghi Eqs. 4.19-4.22).
 The double d_f (inside T_f and again in F^scatter) follows Zinke's Fig. 5 and is kept.
 
-AFC parameters (Table B.1 names in brackets; defaults are the spec §1.3.8 proposals, D-H8;
+AFC parameters (Sadeghi Table B.1 names in brackets; defaults are the spec §1.3.8 proposals, D-H8;
 "hair colour" = exp(-2 sigma_a) of the RSL default sigma_a = (0.2, 0.3, 0.5)):
 
 | parameter       | default            | range       | unit | meaning                                      |
@@ -63,6 +63,8 @@ AFC parameters (Table B.1 names in brackets; defaults are the spec §1.3.8 propo
 | glint_width     | 5 deg              | (0, pi]     | rad  | gamma_g, azimuthal std ("frequency")         |
 | glint_angle     | 37.5 deg           | [0, pi/2]   | rad  | G_angle (thesis: U(30, 45) deg per strand,   |
 |                 |                    |             |      | :func:`random_glint_angle`)                  |
+
+The decisions D-H1 ... D-H9 (the spec's register), their history and the validation: docs/hair.md.
 
 Example::
 
@@ -125,7 +127,7 @@ class Params:
 
 @params_class
 class DualParams:
-    """Dual-scattering densities, artist adjusters (§4.6.2, L1750-1755) and decisions."""
+    """Dual-scattering densities, artist adjusters (Sadeghi §4.6.2, L1750-1755) and decisions."""
 
     d_f: Real = param(0.7, lo=0.0, hi=1.0, doc="forward-scattering density factor d_f")
     d_b: Real = param(0.7, lo=0.0, hi=1.0, doc="backscattering density factor d_b")
@@ -151,12 +153,12 @@ def random_glint_angle(key, shape=()):
 
 
 def unit_gaussian(x, std):
-    """g'(std^2; x) = exp(-x^2 / (2 std^2)): unit height (Eq. 4.9)."""
+    """g'(std^2; x) = exp(-x^2 / (2 std^2)): unit height (Sadeghi Eq. 4.9)."""
     return jnp.exp(-0.5 * (x / std) ** 2)
 
 
 def gaussian(x, var):
-    """g(var; x), unit integral (Eq. 4.8); the RSL's g(variance; x)."""
+    """g(var; x), unit integral (Sadeghi Eq. 4.8); the RSL's g(variance; x)."""
     var = jnp.maximum(var, 1e-300)
     return jnp.exp(-0.5 * x * x / var) / jnp.sqrt(2.0 * jnp.pi * var)
 
@@ -183,7 +185,7 @@ def longitudinal(p: Params, theta_h, extra_var=0.0):
 
 
 def azimuthal(p: Params, phi):
-    """(N'_R, N'_TT, N'_TRT) of Eqs. 4.10-4.14 with |phi| wrapped to [0, pi] (D-H9)."""
+    """(N'_R, N'_TT, N'_TRT) of Sadeghi Eqs. 4.10-4.14 with |phi| wrapped to [0, pi] (D-H9)."""
     a = _abs_phi(phi)
     c = jnp.cos(0.5 * a)
     n_tt = unit_gaussian(jnp.pi - a, p.gamma_tt)
@@ -218,7 +220,7 @@ eval = boundary(_eval, Params)
 
 
 def azimuthal_global(p: Params):
-    """N^G_X = (2/pi) int_{pi/2}^{pi} N'_X dphi (Eq. 4.35), closed form, shape (3,)."""
+    """N^G_X = (2/pi) int_{pi/2}^{pi} N'_X dphi (Sadeghi Eq. 4.35), closed form, shape (3,)."""
     s2 = math.sqrt(2.0)
     n_r = 4.0 / jnp.pi * (1.0 - s2 / 2.0)
     g = p.gamma_tt
@@ -230,7 +232,7 @@ def azimuthal_global(p: Params):
 
 
 class Tables(NamedTuple):
-    """Dual-scattering tables at light inclinations ``theta`` (Table 4.1 names); band-valued
+    """Dual-scattering tables at light inclinations ``theta`` (Sadeghi Table 4.1 names); band-valued
     entries have a trailing bands axis."""
 
     theta: jax.Array
@@ -240,9 +242,9 @@ class Tables(NamedTuple):
     alpha_b: jax.Array
     beta_f2: jax.Array   # squared lobe-weighted standard deviations (rad^2)
     beta_b2: jax.Array
-    A_b: jax.Array       # backscattering attenuation (Eq. 4.27)
-    delta_b: jax.Array   # backscattering shift (Eq. 4.28, rad)
-    sigma_b2: jax.Array  # backscattering variance (Eq. 4.29 squared, rad^2)
+    A_b: jax.Array       # backscattering attenuation (Sadeghi Eq. 4.27)
+    delta_b: jax.Array   # backscattering shift (Sadeghi Eq. 4.28, rad)
+    sigma_b2: jax.Array  # backscattering variance (Sadeghi Eq. 4.29 squared, rad^2)
 
 
 def _nodes(n):
@@ -276,7 +278,7 @@ def lobe_integrals(lobe_fn, theta, n: int = 64, cos_power: int = 2):
 
 
 def backscatter_terms(a_f, a_b, alpha_f, alpha_b, beta_f, beta_b, d_b, a_b_denominator="cube"):
-    """A_b, Delta_b, sigma_b^2 from the averages (Eqs. 4.27-4.29, Zinke 2008 Eqs. 11-14)."""
+    """A_b, Delta_b, sigma_b^2 from the averages (Sadeghi Eqs. 4.27-4.29, Zinke 2008 Eqs. 11-14)."""
     af = jnp.minimum(a_f, A_F_MAX)
     af2 = af * af
     one = 1.0 - af2
@@ -305,7 +307,7 @@ def _lobe_fn_and_shifts(model):
 def tables_kernel(model, dual: DualParams, theta):
     """Dual-scattering tables at ``theta`` from ``model`` (artist-friendly :class:`Params`,
     normalized per ``dual.normalize``; or a :class:`marschner.Params`, physical f_s, never
-    normalized). App. C order: a_f, a_b -> alpha -> beta -> Delta_b -> sigma_b^2 -> A_b."""
+    normalized). Sadeghi App. C order: a_f, a_b -> alpha -> beta -> Delta_b -> sigma_b^2 -> A_b."""
     fn, al, be = _lobe_fn_and_shifts(model)
     back, front = lobe_integrals(fn, theta, dual.n_quad, 2)
     norm = dual.normalize if isinstance(model, Params) else "none"
@@ -367,20 +369,20 @@ def precompute(model, dual: DualParams, n_theta: int = 64):
 
 
 def from_shadow(shadow, hairs_that_cast_full_shadow):
-    """(n_forward, direct_fraction) from a deep-shadow-map opacity (App. C RSL):
+    """(n_forward, direct_fraction) from a deep-shadow-map opacity (Sadeghi App. C RSL):
     n = shadow * hairs_that_cast_full_shadow, directFraction = 1 - shadow."""
     shadow = jnp.asarray(shadow)
     return shadow * hairs_that_cast_full_shadow, 1.0 - shadow
 
 
 def forward_scattering(tab: Tables, d_f, n_forward):
-    """T_f = d_f a_f^n and sigma_f^2 = beta_f^2 n (Eqs. 4.23-4.24)."""
+    """T_f = d_f a_f^n and sigma_f^2 = beta_f^2 n (Sadeghi Eqs. 4.23-4.24)."""
     n = jnp.asarray(n_forward)[..., None]
     return d_f * tab.a_f ** n, tab.beta_f2 * n
 
 
 def forward_from_inclinations_kernel(model, dual: DualParams, theta_k, mask=None):
-    """T_f = d_f prod_k a_f(theta^k), sigma_f^2 = sum_k beta_f^2(theta^k) (Eqs. 4.19-4.22):
+    """T_f = d_f prod_k a_f(theta^k), sigma_f^2 = sum_k beta_f^2(theta^k) (Sadeghi Eqs. 4.19-4.22):
     the exact alternative with the inclinations ``theta_k`` (last axis = occluding hairs,
     ``mask`` marks real ones). Returns shapes theta_k.shape[:-1] + bands."""
     theta_k = jnp.asarray(theta_k, dtype=jnp.result_type(float))
@@ -405,7 +407,7 @@ class DualTerms(NamedTuple):
 def dual_scattering_terms_kernel(p: Params, dual: DualParams, wi: Vec3, wo: Vec3, n_forward=0.0,
                                  direct_fraction=1.0, multiple: Params | None = None, forward=None,
                                  tables: Tables | None = None):
-    """All intermediate quantities of the dual-scattering shader (§4.7.2); shapes wi.shape + bands."""
+    """All intermediate quantities of the dual-scattering shader (Sadeghi §4.7.2); shapes wi.shape + bands."""
     mp = p if multiple is None else multiple
     th_i, ph_i = fiber_angles(wi)
     th_o, ph_o = fiber_angles(wo)
@@ -427,7 +429,7 @@ def dual_scattering_terms_kernel(p: Params, dual: DualParams, wi: Vec3, wo: Vec3
     f_back_direct = back * gaussian(x, tab.sigma_b2 + dual.beta_back)
     f_back_scatter = back * gaussian(x, tab.sigma_b2 + sigma_f2 + dual.beta_back)
     f_s_direct = jnp.sum(lobes(p, th_i, th_o, ph_o - ph_i), axis=0)
-    # indirect single scattering (Eqs. 4.34-4.35): widened unit-height M, front-averaged N
+    # indirect single scattering (Sadeghi Eqs. 4.34-4.35): widened unit-height M, front-averaged N
     al, be = shifts(mp)
     NG = azimuthal_global(mp)
     C = colors(mp) if dual.scatter_color == "include" else jnp.ones_like(colors(mp))
@@ -470,8 +472,8 @@ def dual_scattering_terms(p: Params, dual: DualParams, wi: Vec3, wo: Vec3, n_for
 def dual_scattering(p: Params, dual: DualParams, wi: Vec3, wo: Vec3, n_forward=0.0, direct_fraction=1.0,
                     multiple: Params | None = None, forward=None, tables: Tables | None = None):
     """F^direct + F^scatter (1/sr), shape wi.shape + bands: single + multiple scattering of a
-    hair at depth ``n_forward`` hairs inside a volume (§4.7.2). ``multiple`` is the second
-    AFC set that feeds the multiple-scattering part (§4.6.3; None = same as ``p``)."""
+    hair at depth ``n_forward`` hairs inside a volume (Sadeghi §4.7.2). ``multiple`` is the second
+    AFC set that feeds the multiple-scattering part (Sadeghi §4.6.3; None = same as ``p``)."""
     _check(p, dual, multiple)
     return _dual_jit(p, dual, wi, wo, n_forward, direct_fraction, multiple, forward, tables)
 
@@ -488,7 +490,7 @@ def forward_from_inclinations(model, dual: DualParams, theta_k, mask=None):
 
 
 def afc_from_marschner(mp: marschner.Params, theta_d: float = 0.0, glint_angle=None) -> Params:
-    """Closed-form artist parameters that reproduce the MJC03 lobes at ``theta_d`` (§1.3.8b):
+    """Closed-form artist parameters that reproduce the MJC03 lobes at ``theta_d`` (spec §1.3.8b):
     alpha/beta carry over; C_X I_X = (physical peak) / (sqrt(2 pi) beta_X) (unit height vs unit
     area: the spec's "I_X <- I_X sqrt(2 pi beta^2)" is the inverse direction); R: N_R(0) = F(gamma_i = 0)/4 (the Fresnel falloff with phi is lost); TT: the value
     N_TT(pi) and gamma_TT from the second moment of N_TT about pi; TRT: the off-caustic level
