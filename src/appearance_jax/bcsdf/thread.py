@@ -1,5 +1,5 @@
 """Sadeghi's thread BCSDF: a rough dielectric cylinder with oriented volume scattering
-(Sadeghi 2011, §5.5.3, Eqs. 5.6-5.11, Table 5.1; Sadeghi et al. 2013). Spec seed-002 §1.4.2.
+(Sadeghi 2011 §5.5.3, Eqs. 5.6-5.11, Table 5.1; Sadeghi et al. 2013). Spec seed-002 §1.4.2.
 
 A thread of tangent t, local normal n and binormal v = t x n (any right-handed orthonormal
 triple; for an isolated thread n is arbitrary in the normal plane). For a direction w:
@@ -12,21 +12,21 @@ phi_d = phi_i - phi_r wrapped to [-pi, pi]:
     f_s  = (f_rs + f_rv) / cos^2 theta_d                                                            (5.11)
 
 g(gamma, x) = exp(-x^2 / (2 gamma^2)) / (sqrt(2 pi) gamma) is the *unit-area* Gaussian, in
-1/rad, with x and gamma in radians (decision D-C3; Table 5.2 states gamma in degrees: the
+1/rad, with x and gamma in radians (decision D-C3; Sadeghi Table 5.2 states gamma in degrees: the
 public parameters are in **degrees** and are converted once, here, with the amplitudes of a
 radian Gaussian). f_s is in 1/sr per unit thread length, used with the curve radiance
-integral L_r = int f_s L_i cos theta_i dw_i (Eq. 5.6).
+integral L_r = int f_s L_i cos theta_i dw_i (Sadeghi Eq. 5.6).
 
 Decisions (each a static option, spec §6):
 
 - D-C1 ``theta_d``: ``"half"`` (default): theta_d = (theta_i - theta_r)/2 in 1/cos^2 theta_d,
   Marschner's solid-angle factor of the specular cone. ``"full"``: the literal
-  theta_i - theta_r of Eq. 5.2, whose cos^2 vanishes at theta_i = -theta_r = 45 deg, i.e. *on*
+  theta_i - theta_r of Sadeghi Eq. 5.2, whose cos^2 vanishes at theta_i = -theta_r = 45 deg, i.e. *on*
   the specular cone (a non-physical singularity: f_s is clamped to 0 where cos^2 < 1e-12).
-  Eq. 5.8 uses theta_d/2 with the full difference, i.e. the half difference, in both options.
+  Sadeghi Eq. 5.8 uses theta_d/2 with the full difference, i.e. the half difference, in both options.
 - D-C2 ``volume_fresnel``: ``"longitudinal"`` (default): F = (1 - F_r(eta, |theta_i|))
   (1 - F_r(eta, |theta_r|)) (Stokes: F_t(1/eta, w_r') = F_t(eta, w_r); reciprocal).
-  ``"eq58"``: both factors at the Eq. 5.8 angle, (1 - F_r(eta, theta_58))^2.
+  ``"eq58"``: both factors at the Sadeghi Eq. 5.8 angle, (1 - F_r(eta, theta_58))^2.
 - D-C3: gamma in degrees at this boundary, radians inside g.
 
 F_r is the unpolarised dielectric Fresnel reflectance
@@ -36,7 +36,7 @@ w_i, w_r) in both options. Directions exactly along t (cos theta = 0) give a fin
 
 | parameter | default   | range        | unit | meaning                                       |
 |-----------|-----------|--------------|------|-----------------------------------------------|
-| eta       | 1.46      | [1, 3]       | 1    | refractive index of the thread (Table 2.1)    |
+| eta       | 1.46      | [1, 3]       | 1    | refractive index (Sadeghi Table 2.1)          |
 | albedo    | 0.3       | [0, 1]       | 1    | A, coloured volume albedo, per band           |
 | k_d       | 0.3       | [0, 1]       | 1    | isotropic fraction of the volume scattering   |
 | gamma_s   | 12        | (0, 90]      | deg  | std of the surface Gaussian                   |
@@ -44,7 +44,7 @@ w_i, w_r) in both options. Directions exactly along t (cos theta = 0) give a fin
 | theta_d   | "half"    | half, full   | -    | D-C1                                          |
 | volume_fresnel | "longitudinal" | longitudinal, eq58 | - | D-C2                           |
 
-Defaults are the Linen thread of Table 5.2 (without its colour). Example::
+Defaults are the Linen thread of Sadeghi Table 5.2 (without its colour). Example::
 
     from appearance_jax.bcsdf import thread
     p = thread.linen()
@@ -81,7 +81,7 @@ class Params:
 
 
 def gaussian(gamma, x):
-    """Unit-area Gaussian g(gamma, x) of std ``gamma`` (radians), in 1/rad (Eq. 5.7)."""
+    """Unit-area Gaussian g(gamma, x) of std ``gamma`` (radians), in 1/rad (Sadeghi Eq. 5.7)."""
     return _INV_SQRT_2PI / gamma * jnp.exp(-0.5 * (x / gamma) ** 2)
 
 
@@ -107,7 +107,7 @@ def terms_from_angles(p: Params, sin_i, cos_i, sin_r, cos_r, cos_phi_d, *, eta=N
     theta_h = 0.5 * (theta_i + theta_r)
     # cos(phi_d / 2) >= 0 for phi_d in [-pi, pi] (half-angle formula, no atan2 needed)
     cos_half_phi = safe_sqrt(0.5 * (1.0 + cos_phi_d))
-    cos_half_td = jnp.cos(0.5 * (theta_i - theta_r))  # Eq. 5.8: theta_d / 2 of the full difference
+    cos_half_td = jnp.cos(0.5 * (theta_i - theta_r))  # Sadeghi Eq. 5.8: theta_d / 2 of the full difference
     cos_58 = cos_half_td * cos_half_phi
     f_rs = _fresnel(cos_58, eta) * cos_half_phi * gaussian(gamma_s, theta_h)
     if p.volume_fresnel == "longitudinal":
@@ -127,7 +127,7 @@ def terms_from_angles(p: Params, sin_i, cos_i, sin_r, cos_r, cos_phi_d, *, eta=N
 
 
 def from_dots(p: Params, it, in_, iv, ot, on, ov, **overrides):
-    """f_s (bands last) from the dot products of w_i and w_r with (t, n, v) (Eq. 5.11)."""
+    """f_s (bands last) from the dot products of w_i and w_r with (t, n, v) (Sadeghi Eq. 5.11)."""
     sin_i, sin_r = jnp.clip(it, -1.0, 1.0), jnp.clip(ot, -1.0, 1.0)
     pi2, pr2 = in_ * in_ + iv * iv, on * on + ov * ov
     cos_i, cos_r = safe_sqrt(pi2), safe_sqrt(pr2)
@@ -161,17 +161,17 @@ def _volume_term(p: Params, theta_i, theta_r, phi_d):
 
 
 eval = boundary(_eval, Params)
-"""f_s(t, w_i, w_r) in 1/sr (bands last) for a thread frame (t, n, v = t x n) given as Vec3 (Eq. 5.11)."""
+"""f_s(t, w_i, w_r) in 1/sr (bands last) for a thread frame (t, n, v = t x n) given as Vec3 (Sadeghi Eq. 5.11)."""
 eval_angles = boundary(_eval_angles, Params)
-"""f_s from (theta_i, theta_r, phi_d) in radians (Eq. 5.11)."""
+"""f_s from (theta_i, theta_r, phi_d) in radians (Sadeghi Eq. 5.11)."""
 surface_term = boundary(_surface_term, Params)
-"""f_rs of Eq. 5.7 (no bands axis, not divided by cos^2 theta_d)."""
+"""f_rs of Sadeghi Eq. 5.7 (no bands axis, not divided by cos^2 theta_d)."""
 volume_term = boundary(_volume_term, Params)
-"""f_rv of Eq. 5.9 (bands last, not divided by cos^2 theta_d)."""
+"""f_rv of Sadeghi Eq. 5.9 (bands last, not divided by cos^2 theta_d)."""
 
 
 def linen() -> Params:
-    """The Linen Plain thread of Table 5.2: eta 1.46, A = 0.3 (0.2, 0.8, 1.0), k_d 0.3, gamma 12/24 deg."""
+    """The Linen Plain thread of Sadeghi Table 5.2: eta 1.46, A = 0.3 (0.2, 0.8, 1.0), k_d 0.3, gamma 12/24 deg."""
     return Params(eta=1.46, albedo=(0.06, 0.24, 0.3), k_d=0.3, gamma_s=12.0, gamma_v=24.0)
 
 
