@@ -1,10 +1,10 @@
 """Soap films on spherical bubbles: film-thickness fields and thin-film bubble shading (Huang 2022, Ch. 3).
 
-* :mod:`.bubble`: the real-time bubble shading of Sec. 3.5 -- per-path Airy weights
-  (Eq. 3.29, per polarisation then averaged), the direction recursion through the sphere
-  (Eq. 3.30), spectral-to-RGB shading of a point (Eq. 3.32) and an orthographic
+* :mod:`.bubble`: the real-time bubble shading of Huang Sec. 3.5 -- per-path Airy weights
+  (Huang Eq. 3.29, per polarisation then averaged), the direction recursion through the sphere
+  (Huang Eq. 3.30), spectral-to-RGB shading of a point (Huang Eq. 3.32) and an orthographic
   :func:`render`.
-* :mod:`.thickness`: thickness fields -- the gravity equilibrium (Eq. 3.36), Table 3.2's
+* :mod:`.thickness`: thickness fields -- the gravity equilibrium (Huang Eq. 3.36), Huang Table 3.2's
   dimensionless numbers, equirectangular maps, and field callables for the shader.
 
 Units: film thicknesses passed to the shader are the **full** thickness d = 2 eta in nm

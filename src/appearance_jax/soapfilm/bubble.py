@@ -1,25 +1,25 @@
-"""Thin-film shading of a spherical soap bubble (Huang 2022, Sec. 3.5, Eqs. 3.27-3.32, seed 001).
+"""Thin-film shading of a spherical soap bubble (Huang 2022 Sec. 3.5, Eqs. 3.27-3.32, seed 001).
 
 A view ray hits the bubble (the unit sphere) at the point with outward normal n^(0). Part
 of the light is reflected there (path 0); the rest is transmitted undeviated (parallel
 film interfaces, [T:749]) and bounces inside the sphere along chords. Path k >= 1 is the
 light that entered the film at interaction 0, was reflected at interactions 1 .. k-1 and
-leaves through interaction k ([T:766-772], Fig. 3.11):
+leaves through interaction k ([T:766-772], Huang Fig. 3.11):
 
-    weight^(0) = R^(0),     weight^(k) = T^(0) (prod_{i=1}^{k-1} R^(i)) T^(k)      (Eq. 3.29)
+    weight^(0) = R^(0),     weight^(k) = T^(0) (prod_{i=1}^{k-1} R^(i)) T^(k)      (Huang Eq. 3.29)
 
 R^(i), T^(i) are the Airy reflectance and transmittance of the free-standing film (air |
-soap | air, Eqs. 3.27/3.28, computed by :func:`appearance_jax.optics.thinfilm.airy`) at the
+soap | air, Huang Eqs. 3.27/3.28, computed by :func:`appearance_jax.optics.thinfilm.airy`) at the
 local film thickness of interaction i. They differ only through the thickness: every
 chord of a sphere meets the surface at the same angle at both ends, so all interactions
-of a path have the same incidence cosine ("all angles marked in red are equal", Fig. 3.11).
+of a path have the same incidence cosine ("all angles marked in red are equal", Huang Fig. 3.11).
 
 Polarisation ([T:774]): all interactions of a path lie in one plane (the plane through
 the sphere's centre spanned by n^(0) and the view direction), so the s/p basis never
-rotates: Eq. 3.29 is evaluated for s and p separately and the two weights are averaged
+rotates: Huang Eq. 3.29 is evaluated for s and p separately and the two weights are averaged
 (which differs from multiplying unpolarised R and T).
 
-Direction conventions (Eq. 3.30, [T:776-782])
+Direction conventions (Huang Eq. 3.30, [T:776-782])
 ---------------------------------------------
 Directions point away from the surface (DESIGN.md), the bubble is the unit sphere centred
 at the origin, and the point of interaction i is p_i = n^(i).
@@ -27,7 +27,7 @@ at the origin, and the point of interaction i is p_i = n^(i).
 * ``o^(0) = view``: the unit direction from the bubble towards the observer, the
   library's omega_o. This is the only choice for which the recursion's
   i^(1) = -o^(0) is the direction in which the *transmitted* path 1 sees the environment
-  (straight through the bubble, -view), as Fig. 3.11 requires.
+  (straight through the bubble, -view), as Huang Fig. 3.11 requires.
 * ``o^(i)`` (the thesis' "(virtual) viewing direction") is the unit vector along the
   chord from p_{i+1} to p_i: the camera ray traced backwards travels along -o^(i) from p_i
   to p_{i+1}. It points to the outside of the film at p_i: n^(i) . o^(i) = cos(theta) > 0
@@ -36,27 +36,27 @@ at the origin, and the point of interaction i is p_i = n^(i).
   reflection of -n^(i) about o^(i); invariant under o -> -o).
 * ``i^(i)`` is the direction towards the light of path i (where the environment map is
   looked up), pointing away from the film at p_i: i^(0) = 2 (n^(0) . o^(0)) n^(0) - o^(0)
-  (mirror reflection of the view direction; Eq. 3.30 gives only i >= 1), and
+  (mirror reflection of the view direction; Huang Eq. 3.30 gives only i >= 1), and
   i^(k) = -o^(k-1) for k >= 1 (the light crosses the film at p_k undeviated).
 * ``o^(i+1) = o^(i) - 2 (o^(i) . n^(i+1)) n^(i+1)`` = reflect(i^(i+1), n^(i+1)), so
   o^(i) = reflect(i^(i), n^(i)) holds for every i, i = 0 included.
 
 With ``n_paths = N`` the paths 0 .. N-1 are evaluated, which need the thickness at the N
 interactions 0 .. N-1 (the thesis keeps the first N = 8 light paths, [T:778]; its
-Eq. 3.32 writes the sum to N). For a uniform lossless film the weights then sum to
+Huang Eq. 3.32 writes the sum to N). For a uniform lossless film the weights then sum to
 1 - T R^(N-1) per wavelength and polarisation (spec SB-1).
 
 The cosine of every interaction is |n^(0) . o^(0)| (the film has air on both sides, so
 its response depends only on |cos|). ``shade`` expects n^(0) . view >= 0 (a point the
 observer sees from outside).
 
-Colour (Eqs. 3.31/3.32): the environment is an RGB map, so its spectrum is taken as
+Colour (Huang Eqs. 3.31/3.32): the environment is an RGB map, so its spectrum is taken as
 constant per channel and each path's spectral weight is integrated against the output
 colour space's matching functions: with ``color="cie"`` the path weights on the
 380-780 nm grid (5 nm, [T:742]) go through
 :func:`appearance_jax.core.spectral.to_bands` (CIE 1931 -> linear sRGB under D65) and each
 channel is white-balanced so that a unit spectrum maps to (1, 1, 1)
-(:func:`appearance_jax.core.spectral.cie_rgb_matrix`). That normalisation is what Eq. 3.32
+(:func:`appearance_jax.core.spectral.cie_rgb_matrix`). That normalisation is what Huang Eq. 3.32
 assumes (int s_j d lambda = 1, so that a path of weight 1 -- a film of zero thickness --
 passes the RGB environment through unchanged). ``"rgb3"`` samples
 one wavelength per channel (650, 510, 475 nm); ``"spectral"`` keeps the wavelengths
@@ -116,12 +116,12 @@ def _as_vec3(v, name) -> Vec3:
 
 
 # --------------------------------------------------------------------------------------
-# Path weights (Eq. 3.29)
+# Path weights (Huang Eq. 3.29)
 # --------------------------------------------------------------------------------------
 
 
 class PathWeights(NamedTuple):
-    """Eq. 3.29 path weights, ``(..., N, n_wavelengths)``: the polarisation average and s, p."""
+    """Huang Eq. 3.29 path weights, ``(..., N, n_wavelengths)``: the polarisation average and s, p."""
 
     mean: jax.Array
     s: jax.Array
@@ -140,11 +140,11 @@ def _chain(R, T):
 
 def path_weights(cos_theta, thicknesses_nm, wavelengths_nm, eta_film=1.33, eta_air=1.0, *,
                  per_polarization: bool = False):
-    """Spectral weights of the first N light paths through a bubble, Eq. 3.29 (Huang 2022).
+    """Spectral weights of the first N light paths through a bubble, Huang Eq. 3.29.
 
     Args:
         cos_theta: ``(...)`` cosine of the incidence angle, shared by all interactions of
-            a path (Fig. 3.11), in [0, 1].
+            a path (Huang Fig. 3.11), in [0, 1].
         thicknesses_nm: ``(..., N)`` **full** film thickness (nm, >= 0) at interactions
             0 .. N-1 of the path (2 eta of the thesis).
         wavelengths_nm: ``(n_wavelengths,)`` vacuum wavelengths (nm, > 0).
@@ -154,10 +154,10 @@ def path_weights(cos_theta, thicknesses_nm, wavelengths_nm, eta_film=1.33, eta_a
 
     Returns:
         ``(..., N, n_wavelengths)``: weight^(k)(lambda) for paths k = 0 .. N-1, the average of
-        Eq. 3.29 evaluated for s and p separately ([T:774]); or a :class:`PathWeights`
+        Huang Eq. 3.29 evaluated for s and p separately ([T:774]); or a :class:`PathWeights`
         ``(mean, s, p)`` if ``per_polarization``. Fractions of power (dimensionless).
 
-    R^(i), T^(i) are :func:`appearance_jax.optics.thinfilm.airy` (Eqs. 3.27/3.28); the
+    R^(i), T^(i) are :func:`appearance_jax.optics.thinfilm.airy` (Huang Eqs. 3.27/3.28); the
     products are cumulative products (no loop over paths). Zero thickness gives R = 0,
     T = 1: only path 1 (straight through) carries light.
     """
@@ -184,7 +184,7 @@ def _path_weights(c, d, wl, eta_film, eta_air) -> PathWeights:
 
 
 def path_colors(cos_theta, thicknesses_nm, eta_film=1.33, eta_air=1.0, color: str = "cie", wavelengths=None):
-    """Colour of each path's weight, the integrals int s_j(lambda) weight_n(lambda) d lambda of Eq. 3.32.
+    """Colour of each path's weight, the integrals int s_j(lambda) weight_n(lambda) d lambda of Huang Eq. 3.32.
 
     Returns ``(..., N, 3)`` for ``color`` "cie" (linear sRGB under D65, each channel
     normalised so that a weight of 1 at every wavelength maps to exactly (1, 1, 1)) or
@@ -202,7 +202,7 @@ def path_colors(cos_theta, thicknesses_nm, eta_film=1.33, eta_air=1.0, color: st
 
 
 # --------------------------------------------------------------------------------------
-# Directions (Eq. 3.30)
+# Directions (Huang Eq. 3.30)
 # --------------------------------------------------------------------------------------
 
 
@@ -222,7 +222,7 @@ class PathDirections(NamedTuple):
 
 
 def path_directions(normal, view, n_paths: int = 8) -> PathDirections:
-    """The direction recursion of Eq. 3.30 (Huang 2022) for the first ``n_paths`` interactions.
+    """The direction recursion of Huang Eq. 3.30 for the first ``n_paths`` interactions.
 
     Args:
         normal: outward unit normal n^(0) at the point seen (``Vec3`` or ``(..., 3)``;
@@ -263,13 +263,13 @@ def _path_directions(normal, view, n_paths):
 
 
 # --------------------------------------------------------------------------------------
-# Shading (Eq. 3.32)
+# Shading (Huang Eq. 3.32)
 # --------------------------------------------------------------------------------------
 
 
 def shade(view_dir, normal, environment: Callable, thickness: Callable, n_paths: int = 8,
           eta_film=1.33, eta_air=1.0, color: str = "cie", wavelengths=None):
-    """Radiance of a soap-bubble point, Eq. 3.32 (Huang 2022): sum_n L_i^(n) int s_j weight_n d lambda.
+    """Radiance of a soap-bubble point, Huang Eq. 3.32 : sum_n L_i^(n) int s_j weight_n d lambda.
 
     Args:
         view_dir: direction from the point towards the observer (``Vec3`` or ``(..., 3)``).

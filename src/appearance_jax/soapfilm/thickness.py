@@ -7,21 +7,21 @@ Conventions
 * **World +z is up** (gravity points along -z). The polar angle theta is measured from
   the top, cos(theta) = n . up, so theta = 0 is the top of the bubble and theta = pi the
   bottom; the azimuth phi = atan2(n.y, n.x) in [0, 2 pi). This is the (theta, phi) grid of
-  the thesis' simulation ([T:620-640]; Eq. 3.33 has gravity g sin(theta) pulling towards
+  the thesis' simulation ([T:620-640]; Huang Eq. 3.33 has gravity g sin(theta) pulling towards
   theta = pi).
-* The thesis' film variable eta is the **half** thickness (the film is 2 eta thick, Fig. 3.2,
+* The thesis' film variable eta is the **half** thickness (the film is 2 eta thick, Huang Fig. 3.2,
   [T:502]; optical path difference 4 eta n cos(theta_s), [T:753]). The shading
   (:mod:`appearance_jax.soapfilm.bubble`, :func:`appearance_jax.optics.thinfilm.airy`)
   takes the **full** thickness d = 2 eta in nm. The field builders below return full
-  thicknesses in nm and take the mean *half* thickness eta_0 in nm (Table 3.1 lists
+  thicknesses in nm and take the mean *half* thickness eta_0 in nm (Huang Table 3.1 lists
   eta_0 = 4e-7 ... 1e-6 m, i.e. 400 ... 1000 nm, hence full thicknesses 800 ... 2000 nm).
 
 Contents
 --------
-* :func:`equilibrium_thickness`: the gravity-only equilibrium profile, Eq. 3.36, in units
+* :func:`equilibrium_thickness`: the gravity-only equilibrium profile, Huang Eq. 3.36, in units
   of the mean half thickness, with the printed normalisation (mean over theta) or a
   volume-conserving one (area mean over the sphere).
-* :func:`dimensionless_numbers`: Table 3.2 from the dimensional constants of Table 3.1
+* :func:`dimensionless_numbers`: Huang Table 3.2 from the dimensional constants of Huang Table 3.1
   (with the drag-coefficient misprint fixed: bubble radius R, not the gas constant).
 * :func:`latlong_thickness`: bilinear lookup of an equirectangular (n_theta, n_phi) map.
 * field builders (callables ``Vec3 -> thickness_nm`` for
@@ -83,7 +83,7 @@ def _check_nonnegative(name, x, unit=""):
 
 
 # --------------------------------------------------------------------------------------
-# Equilibrium profile (Eq. 3.36)
+# Equilibrium profile (Huang Eq. 3.36)
 # --------------------------------------------------------------------------------------
 
 
@@ -130,7 +130,7 @@ def _volume_profile(a, c):
 
 
 def equilibrium_thickness(theta, g_over_M, normalization: str = "printed"):
-    """Gravity-only equilibrium half thickness eta(theta) / eta_0, Eq. 3.36 (Huang 2022).
+    """Gravity-only equilibrium half thickness eta(theta) / eta_0, Huang Eq. 3.36.
 
     Balancing the Marangoni force against gravity with Gamma = eta initially (Eqs.
     3.33-3.35, [T:840-860]): -(M / eta) d(eta)/d(theta) + g sin(theta) = 0, so
@@ -142,9 +142,9 @@ def equilibrium_thickness(theta, g_over_M, normalization: str = "printed"):
     Args:
         theta: polar angle from the **top** of the bubble (radians, [0, pi]).
         g_over_M: the ratio g / M of the scaled gravity g = G R / U^2 and the Marangoni
-            number M (Table 3.2); dimensionless, any real (0 gives a uniform film).
+            number M (Huang Table 3.2); dimensionless, any real (0 gives a uniform film).
         normalization: how C is fixed.
-            ``"printed"`` (as printed in Eq. 3.36): C = pi / int_0^pi e^{-(g/M) cos t} dt
+            ``"printed"`` (as printed in Huang Eq. 3.36): C = pi / int_0^pi e^{-(g/M) cos t} dt
             = 1 / I_0(g/M): the plain mean over theta is 1.
             ``"volume"``: int_0^pi eta sin(theta) d(theta) = 2, i.e. the area mean over the
             sphere is 1 (volume of liquid conserved): C = (g/M) / sinh(g/M).
@@ -154,7 +154,7 @@ def equilibrium_thickness(theta, g_over_M, normalization: str = "printed"):
         Multiply by the mean half thickness eta_0, and by 2 for the full thickness.
 
     Both constants are closed forms (Bessel I_0 via the exponentially scaled ``i0e``), so
-    the profile is differentiable in ``g_over_M``. Reference values (spec SS-2, Fig. 3.13
+    the profile is differentiable in ``g_over_M``. Reference values (spec SS-2, Huang Fig. 3.13
     setting): g/M = 0.473 -> eta(top) = 0.590, eta(bottom) = 1.518 (printed).
     """
     if normalization not in NORMALIZATIONS:
@@ -174,12 +174,12 @@ def _equilibrium(theta, a, normalization):
 
 
 # --------------------------------------------------------------------------------------
-# Tables 3.1 / 3.2
+# Huang Tables 3.1 / 3.2
 # --------------------------------------------------------------------------------------
 
 
 class Constants(NamedTuple):
-    """Dimensional constants of Table 3.1 (Huang 2022, [T:796-812]); SI units."""
+    """Dimensional constants of Huang Table 3.1 ([T:796-812]); SI units."""
 
     gamma_a: float = 7.275e-2  # N/m, surface tension of the water-air interface
     R_gas: float = 8.3144598  # J/(mol K), gas constant (printed as R-bar)
@@ -195,7 +195,7 @@ TABLE_3_1 = Constants()
 
 
 class DimensionlessNumbers(NamedTuple):
-    """Table 3.2 (Huang 2022, [T:814-826])."""
+    """Huang Table 3.2 ([T:814-826])."""
 
     epsilon: jax.Array  # expansion parameter eta_0 / R
     M: jax.Array  # Marangoni number Gamma_0 R_gas T / (rho eta_0 U^2)
@@ -205,20 +205,20 @@ class DimensionlessNumbers(NamedTuple):
 
     @property
     def g_over_M(self):
-        """The one parameter of the equilibrium profile, Eq. 3.36."""
+        """The one parameter of the equilibrium profile, Huang Eq. 3.36."""
         return self.g / self.M
 
 
 def dimensionless_numbers(R=0.05, eta0=5e-7, U=1.0, Gamma0=1.669e-7,
                           constants: Constants = TABLE_3_1) -> DimensionlessNumbers:
-    """Table 3.2 from the dimensional parameters (Huang 2022, [T:814-826]).
+    """Huang Table 3.2 from the dimensional parameters ([T:814-826]).
 
     Args:
-        R: bubble radius (m), Table 3.1 range 0.02-0.1.
+        R: bubble radius (m), Huang Table 3.1 range 0.02-0.1.
         eta0: mean **half** thickness (m), range 4e-7-1e-6.
         U: characteristic velocity (m/s), 1 in the thesis.
         Gamma0: mean surfactant concentration (mol/m^2), range 1e-8-1e-6.
-        constants: the remaining constants of Table 3.1.
+        constants: the remaining constants of Huang Table 3.1.
 
     Returns:
         :class:`DimensionlessNumbers` (epsilon, M, Re, Cr, g; ``.g_over_M``).
@@ -227,7 +227,7 @@ def dimensionless_numbers(R=0.05, eta0=5e-7, U=1.0, Gamma0=1.669e-7,
     the gas constant R-bar [T:825]; that is a misprint for the bubble radius R (spec
     §0.4.2): with R the tabulated 2.1 is reproduced. The defaults (R = 0.05 m,
     eta_0 = 5e-7 m, U = 1 m/s, Gamma_0 = 1.669e-7 mol/m^2) reproduce the values of
-    Table 3.2 (epsilon 1e-5, M 0.83, Re 5.6e4, Cr 2.1, g 0.49); the thesis does not state
+    Huang Table 3.2 (epsilon 1e-5, M 0.83, Re 5.6e4, Cr 2.1, g 0.49); the thesis does not state
     them (spec §1.2.11 [DERIVED]).
     """
     for name, v in (("R", R), ("eta0", eta0), ("U", U), ("Gamma0", Gamma0)):
@@ -246,7 +246,7 @@ def dimensionless_numbers(R=0.05, eta0=5e-7, U=1.0, Gamma0=1.669e-7,
 def gamma0_for_marangoni(M, eta0=5e-7, U=1.0, constants: Constants = TABLE_3_1):
     """The surfactant concentration Gamma_0 (mol/m^2) giving Marangoni number ``M``.
 
-    Inverse of M = Gamma_0 R_gas T / (rho eta_0 U^2) (Table 3.2); M = 0.83 with the
+    Inverse of M = Gamma_0 R_gas T / (rho eta_0 U^2) (Huang Table 3.2); M = 0.83 with the
     defaults gives 1.669e-7 mol/m^2 (spec SS-1).
     """
     _check_positive("M", M)
@@ -282,7 +282,7 @@ def latlong_thickness(values, normal: Vec3):
 
     phi wraps around; across a pole the neighbouring row is the first (last) row on the
     opposite meridian (phi + pi), so the lookup is continuous through the poles
-    (cf. the pole crossing of Fig. 3.8). Jittable, differentiable in ``values`` and
+    (cf. the pole crossing of Huang Fig. 3.8). Jittable, differentiable in ``values`` and
     (almost everywhere) in ``normal``.
     """
     v = jnp.asarray(values)
@@ -344,13 +344,13 @@ def uniform_field(thickness_nm):
 
 
 def equilibrium_field(g_over_M, eta0_nm=400.0, normalization: str = "printed", up=(0.0, 0.0, 1.0)):
-    """The equilibrium film of Eq. 3.36 as a field ``normal -> full thickness (nm)``.
+    """The equilibrium film of Huang Eq. 3.36 as a field ``normal -> full thickness (nm)``.
 
     d(n) = 2 eta0_nm * eta(theta) / eta_0 with cos(theta) = n . up (theta from the top).
 
     Args:
-        g_over_M: g / M of Table 3.2 (see :func:`dimensionless_numbers`); may be traced.
-        eta0_nm: mean **half** thickness eta_0 in nm (Table 3.1: 400-1000 nm); the full
+        g_over_M: g / M of Huang Table 3.2 (see :func:`dimensionless_numbers`); may be traced.
+        eta0_nm: mean **half** thickness eta_0 in nm (Huang Table 3.1: 400-1000 nm); the full
             thickness is twice it (the film is 2 eta thick, [T:502]).
         normalization: ``"printed"`` or ``"volume"`` (see :func:`equilibrium_thickness`).
         up: the world up direction (opposite to gravity), default +z.
