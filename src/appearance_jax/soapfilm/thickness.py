@@ -132,7 +132,7 @@ def _volume_profile(a, c):
 def equilibrium_thickness(theta, g_over_M, normalization: str = "printed"):
     """Gravity-only equilibrium half thickness eta(theta) / eta_0, Huang Eq. 3.36.
 
-    Balancing the Marangoni force against gravity with Gamma = eta initially (Eqs.
+    Balancing the Marangoni force against gravity with Gamma = eta initially (Huang Eqs.
     3.33-3.35, [T:840-860]): -(M / eta) d(eta)/d(theta) + g sin(theta) = 0, so
 
         eta(theta) = C exp(-(g / M) cos(theta)),
