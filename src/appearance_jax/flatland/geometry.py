@@ -7,7 +7,7 @@ motion is ``p + t (d.y, d.z)``, so the ray parameter ``t`` is the **3D** path le
 
 An ellipse has centre ``(cy, cz)``, semi-axes ``a`` (along its own first axis) and ``b``,
 and a rotation ``psi`` of its first axis from +y towards +z. Its parametric angle ``gamma``
-puts the point at ``c + R(psi) (a cos gamma, b sin gamma)`` (B.3, Padrón 2025 App. B). An
+puts the point at ``c + R(psi) (a cos gamma, b sin gamma)`` (Padrón Eq. B.3, App. B). An
 open arc keeps the points with ``gamma`` in ``[lo, lo + span]``.
 
 Self-intersection is excluded exactly instead of with epsilons: a ray leaving a shape starts
@@ -138,7 +138,7 @@ def half_width(uy, uz, a, b, psi):
 
     sqrt(a^2 e_z^2 + b^2 e_y^2) with e the direction in the ellipse frame (spec Q-F4); for
     a = 1 and a direction at azimuth phi this is Huang's D = sqrt(1 - e^2 sin^2 phi)
-    (Eq. 4.27, Huang 2022) when the major axis is perpendicular to phi = 0.
+    (Huang Eq. 4.27) when the major axis is perpendicular to phi = 0.
     """
     ey, ez = dir_to_local(uy, uz, psi)
     return jnp.sqrt(a * a * ez * ez + b * b * ey * ey)

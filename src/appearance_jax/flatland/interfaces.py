@@ -7,12 +7,12 @@ the reflected and transmitted children with their direction, power factor per ba
 
 Rough dielectrics (Huang 2022, Ch. 4; spec seed-001 §4.3 item 3): the microfacet normal is
 drawn from the visible-normal distribution about the **mesonormal**
-n_alpha = (sin alpha, n_y cos alpha, n_z cos alpha) (Eq. 4.39; from inside the tilt sign
-flips, §1.3.8), the child is weighted by Smith G1 of its direction about the mesonormal, and
+n_alpha = (sin alpha, n_y cos alpha, n_z cos alpha) (Huang Eq. 4.39; from inside the tilt sign
+flips, spec seed-001 §1.3.8), the child is weighted by Smith G1 of its direction about the mesonormal, and
 rays whose incoming, outgoing or microfacet directions fall on the wrong side of the macro
 or meso surface are killed. Their microfacet BSDF has the meso-centred NDF but macro-frame
 cosines, f = F D G1 G1 / (4 |i.n||o.n|) (the thesis's semantics: the macro area element
-da_m = dphi_m ds of Eq. 4.4 receives flux L |omega_i . omega_h| D, Eqs. 4.5-4.7): sampled
+da_m = dphi_m ds of Huang Eq. 4.4 receives flux L |omega_i . omega_h| D, Huang Eqs. 4.5-4.7): sampled
 weights therefore carry |d.n_alpha| / |d.n| (the meso area seen per macro area), which is 1
 without tilt.
 """
@@ -31,7 +31,7 @@ from ..optics.fresnel import fresnel_amplitudes_complex, fresnel_dielectric
 
 
 def meso_normal(n_out: Vec3, tilt, from_outside):
-    """Mesonormal facing the incident side (Eq. 4.39, Huang 2022; inside: negated)."""
+    """Mesonormal facing the incident side (Huang Eq. 4.39; inside: negated)."""
     m = fiber.meso_normal(n_out.y, n_out.z, tilt)
     return V.where(from_outside, m, -m)
 

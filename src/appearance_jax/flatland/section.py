@@ -49,7 +49,7 @@ class Interface:
         (Snell in 3D about the in-plane normal, total internal reflection). ``roughness`` > 0
         makes it a rough dielectric: a microfacet normal is sampled (visible normals, Heitz
         2018) about the **mesonormal** tilted by ``tilt`` along the fiber axis (cuticle
-        scales, Eq. 4.39, Huang 2022), weighted by Smith G1 of the outgoing direction; rays
+        scales, Huang Eq. 4.39), weighted by Smith G1 of the outgoing direction; rays
         whose directions disagree with the macro or meso surface are killed (spec seed-001
         §4.3 item 3).
       - ``"film"``: a smooth dielectric interface coated with a thin film: Airy reflectance
@@ -152,7 +152,7 @@ class Shape:
 @dataclass(frozen=True)
 class Medium:
     """A homogeneous region: refractive index ``eta`` and absorption ``sigma_a`` (1/length,
-    per band; Beer-Lambert on the 3D path length, Eq. 4.17, Huang 2022)."""
+    per band; Beer-Lambert on the 3D path length, Huang Eq. 4.17)."""
 
     eta: jax.Array = 1.0
     sigma_a: jax.Array = 0.0
@@ -253,12 +253,12 @@ def fiber(eta=1.55, sigma_a=0.0, *, eccentricity=0.0, rotation=0.0, roughness=0.
         sigma_a: cortex absorption per unit radius (scalar or per band).
         eccentricity: e = sqrt(1 - b^2) of the cortex ellipse, whose semi-axis 1 is along z
             and b along y, so its projected half width from azimuth phi is
-            D(phi) = sqrt(1 - e^2 sin^2 phi) (Eq. 4.27, Huang 2022).
+            D(phi) = sqrt(1 - e^2 sin^2 phi) (Huang Eq. 4.27).
         rotation: rotation (rad) of the cross-section about the fiber axis.
         roughness, tilt, distribution: the cuticle (rough dielectric about the mesonormal
-            tilted by ``tilt`` rad, Eq. 4.39, Huang 2022); 0 = smooth.
+            tilted by ``tilt`` rad, Huang Eq. 4.39); 0 = smooth.
         medulla: None, or ``(cy, cz, a, b)`` of an inner ellipse (unrotated, then rotated with
-            the section), e.g. ``(0.0, 0.0, 0.6, 0.6)`` (Fig. 5.7, Padrón 2025).
+            the section), e.g. ``(0.0, 0.0, 0.6, 0.6)`` (Padrón Fig. 5.7).
         medulla_kind: ``"diffuse"`` (Lambertian of reflectance ``medulla_albedo``),
             ``"absorber"``, or ``"dielectric"`` (index ``medulla_eta``, absorption
             ``medulla_sigma_a``).

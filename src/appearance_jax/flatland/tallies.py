@@ -1,7 +1,7 @@
 """Tallies of the flatland tracer: far-field histograms, the BCSDF, per-lobe albedo, the
 deterministic smooth mode and the camera-side next-event estimator.
 
-Flux bookkeeping (spec seed-001 §4.3 item 6; Huang 2022 Eqs. 4.9-4.10, 4.27): rays are
+Flux bookkeeping (spec seed-001 §4.3 item 6; Huang Eqs. 4.9-4.10, 4.27): rays are
 launched uniformly over the projected width 2 D_i of the object, so each carries the flux
 2 D_i cos(theta_i) / N per unit fiber length (unit irradiance). A histogram bin of solid
 angle dOmega = (sin theta_1 - sin theta_0) dphi collecting power W estimates the density
@@ -148,7 +148,7 @@ class BCSDF(NamedTuple):
 
 def bcsdf_from_histogram(hist: Histogram) -> BCSDF:
     """S(omega_i, omega_o) = (D_i / D_o) p(omega_o) / cos(theta_o), averaged over each bin,
-    with standard errors from the per-path spread (Huang 2022 Eqs. 4.9-4.10, 4.27)."""
+    with standard errors from the per-path spread (Huang Eqs. 4.9-4.10, 4.27)."""
     te, pe = hist.theta_edges, hist.phi_edges
     d_omega = (jnp.sin(te[1:]) - jnp.sin(te[:-1]))[:, None] * (pe[1:] - pe[:-1])[None, :]
     d_omega = d_omega[None, :, :, None]
@@ -277,7 +277,7 @@ def _masking(section, wo, key, n):
 
 def masking_fraction(section: Section, wo: Vec3, key, n_paths: int = 2 ** 16):
     """Fraction of the projected period of a periodic row covered by its shapes, seen from
-    ``wo`` (the barbule weight w'_bb of Padrón 2025 App. B, spec M23): rays are launched
+    ``wo`` (the barbule weight w'_bb of Padrón App. B, spec M23): rays are launched
     uniformly over one period towards -wo and classified by their first hit. Returns
     ``(fraction, stderr, truncated_fraction)``."""
     section = section.validate()
