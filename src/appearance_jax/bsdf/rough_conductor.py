@@ -24,7 +24,7 @@ weight = f cos theta_o / pdf = R F G2 / G1(wi).
 | shadowing            | "correlated"             | correlated, separable | - | Smith G2 form                  |
 
 Defaults: eta and k are gold (Johnson & Christy 1972, ``data/refractive_index/Au_Johnson.yml``,
-linearly interpolated at 650, 510, 475 nm, the R, G, B wavelengths used by the Padron 2025
+linearly interpolated at 650, 510, 475 nm, the R, G, B wavelengths used by the Padrón 2025
 thesis [T:526]); eta and k are relative to the outside medium (air).
 
 Roughness range: alpha is the RMS slope (x sqrt(2) for Beckmann). Below 1e-3 the lobe is

@@ -204,7 +204,7 @@ def in_plane_directions(theta_i, theta_o):
 
     wi = (sin theta_i, 0, cos theta_i) and wo = (-sin theta_o, 0, cos theta_o), so that
     theta_o = theta_i is the mirror direction and theta_o = -theta_i is retro-reflection
-    (the convention of Fig. 4.4, Padrón 2025; spec D12).
+    (the convention of Padrón Fig. 4.4; spec D12).
     """
     wi = Vec3(jnp.sin(theta_i), jnp.zeros_like(jnp.asarray(theta_i, dtype=float)), jnp.cos(theta_i))
     wo = Vec3(-jnp.sin(theta_o), jnp.zeros_like(jnp.asarray(theta_o, dtype=float)), jnp.cos(theta_o))

@@ -120,7 +120,7 @@ def platelet_D(m, wi: Vec3, wo: Vec3):
 
 
 def scattering(m, wi: Vec3, wo: Vec3):
-    """Lambda(wi) f(wi -> wo) of Eqs. 4.7 x 4.8 [1/sr], bands last.
+    """Lambda(wi) f(wi -> wo) of Padrón Eqs. 4.7 x 4.8 [1/sr], bands last.
 
     Written as ``(Lambda_d c_d f_d + Lambda_p (1 - c_d) D(wh) / 4) / sigma_t(wi)``, which
     avoids dividing by the projected area. Multiplied by ``sigma_t(wi)`` it is symmetric in

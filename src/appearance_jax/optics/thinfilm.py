@@ -202,7 +202,7 @@ def _interface_pairs(qi, qt, ei, et):
 
 
 def airy(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2) -> FilmResponse:
-    """One film on a substrate: Airy amplitudes and power coefficients (spec M10, Padron 2025).
+    """One film on a substrate: Airy amplitudes and power coefficients (spec M10, Padrón 2025).
 
     Args:
         cos0: cosine of the incidence angle in the eta0 medium, in [0, 1].
@@ -363,7 +363,7 @@ def film_rgb(cos0, thickness_nm, eta0, eta1, eta2, *, mode: str = "cie", quantit
     and converted to white-balanced linear sRGB (a perfect reflector maps to (1, 1, 1);
     :func:`appearance_jax.core.spectral.cie_rgb_matrix`).
     ``mode="rgb3"``: the thesis' cheap mode, one wavelength per channel
-    (650, 510, 475 nm, Padron 2025 [T:526]), prone to spectral aliasing [T:526].
+    (650, 510, 475 nm, Padrón 2025 [T:526]), prone to spectral aliasing [T:526].
     """
     if mode not in ("cie", "rgb3"):
         raise ValueError(f"mode = {mode!r}: must be 'cie' or 'rgb3'")
