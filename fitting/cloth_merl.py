@@ -6,12 +6,12 @@ number below describes a fit to a proxy, not to the raw measurement. The proxies
 the out-of-plane gonioreflectometer grid of :mod:`merl_fabrics` (theta_i in {0, 20, 40, 60, 75}
 deg, theta_o 0..80 deg, phi_o - phi_i 0..180 deg: 315 directions x RGB).
 
-Models (each fitted to all seven tables at once, :func:`appearance_jax.fit.batch.fit_batch`, in the
+Models (each fitted to all seven tables at once, :func:`appearance_jax.fit.solve.batch.fit_batch`, in the
 cosine-weighted log metric; both error metrics are reported):
 
 * ``rough_plastic`` (eta = 1.5 fixed) and ``rough_conductor+lambert``: the baselines of
   :mod:`merl_fabrics`;
-* ``cloth_weave`` (:mod:`appearance_jax.bsdf.cloth_weaves`) with the weave family ``plain``,
+* ``cloth_weave`` (:mod:`appearance_jax.bsdf.cloth.weaves`) with the weave family ``plain``,
   ``satin`` and ``twill``; 14 free parameters: per thread family the RGB albedo, k_d, gamma_s,
   gamma_v, the weave angle alpha and the threads' index eta (the only scale of the Fresnel
   surface lobe, as in Table 5.2 where it is fitted per fabric).
@@ -52,9 +52,9 @@ def fit_cloth(fabrics, weaves, metric="cos_log", steps=100, n_rotations=6, n_sam
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from appearance_jax.bsdf import cloth_weaves
+    from appearance_jax.bsdf.cloth import weaves as cloth_weaves
     from appearance_jax.fit import proxy
-    from appearance_jax.fit.batch import fit_batch
+    from appearance_jax.fit.solve.batch import fit_batch
 
     tables = [proxy.proxy_table(name, "gonio") for name in fabrics]
     values = np.stack([t.values for t in tables])

@@ -14,7 +14,8 @@ import pytest
 
 from appearance_jax import testing
 from appearance_jax.bcsdf import thread
-from appearance_jax.bsdf import cloth, weave
+from appearance_jax.bsdf import cloth
+from appearance_jax.bsdf.cloth import model as cloth_model, weave
 from appearance_jax.core.vec import Vec3
 
 D = math.pi / 180.0
@@ -153,9 +154,9 @@ def test_k4_masking_reweighting_properties():
 
 @jax.jit
 def _eq513(p, wi, wo):
-    alpha, cb, sb = cloth._family(p)
-    it, in_, iv = cloth._components(wi, alpha, cb, sb)
-    ot, on, ov = cloth._components(wo, alpha, cb, sb)
+    alpha, cb, sb = cloth_model._family(p)
+    it, in_, iv = cloth_model._components(wi, alpha, cb, sb)
+    ot, on, ov = cloth_model._components(wo, alpha, cb, sb)
     fams = []
     for j in range(2):
         tp = thread.Params(eta=p.eta, albedo=p.albedo[j], k_d=p.k_d[j], gamma_s=p.gamma_s[j], gamma_v=p.gamma_v[j])
@@ -342,7 +343,7 @@ def test_thread_energy_tables_are_the_exit_albedo_of_one_flat_sample():
     """D-C10: for one flat sample (alpha = 0) lit in its normal-tangent plane, the cloth's albedo (generic quadrature of
     eval) is exactly the table C2(theta_i); with the cap it is C2 / max(1, C2), i.e. 1 for this bright thread
     (C2 of the red band is ~1.6 at normal incidence)."""
-    from appearance_jax.bsdf import cloth_energy
+    from appearance_jax.bsdf.cloth import energy as cloth_energy
 
     p = _one_sample(0.0)
     nodes = [24, 32, 40, 44]  # theta_i = 0, 30, 60, 75 deg (table nodes: no interpolation)
@@ -358,7 +359,7 @@ def test_thread_energy_tables_are_the_exit_albedo_of_one_flat_sample():
 def test_thread_energy_interpolation_batched_tables():
     """The exit-albedo interpolation gathers from one flattened table for unbatched parameters and broadcasts
     batched tables; both paths agree, and hit the table values at the nodes."""
-    from appearance_jax.bsdf import cloth_energy
+    from appearance_jax.bsdf.cloth import energy as cloth_energy
 
     p = _p("silk_shot")
     C2 = cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)[0]  # (J, N, bands)
@@ -372,7 +373,7 @@ def test_thread_energy_interpolation_batched_tables():
 def test_thread_energy_estimate_bounds_tilted_samples():
     """For a tilted sample, rho = cos(a) C2 + |sin a| C1 is an upper estimate ([x + y]_+ <= x_+ + y_+): the thesis-form
     albedo stays below it and the capped albedo below 1."""
-    from appearance_jax.bsdf import cloth_energy
+    from appearance_jax.bsdf.cloth import energy as cloth_energy
 
     for alpha in (-40.0, 30.0):
         p = _one_sample(alpha)
@@ -424,12 +425,12 @@ def test_normalization_floor_weights_are_bounded_by_incident_ones():
     wi, wo = _random_pairs(5, 300)
     for normalization in ("all", "per_family"):
         p = _bright_weave(normalization=normalization, normalization_floor="always")
-        alpha, cb, sb = cloth._family(p)
-        it, in_, iv = cloth._components(wi, alpha, cb, sb)
-        ot, on, _ = cloth._components(wo, alpha, cb, sb)
+        alpha, cb, sb = cloth_model._family(p)
+        it, in_, iv = cloth_model._components(wi, alpha, cb, sb)
+        ot, on, _ = cloth_model._components(wo, alpha, cb, sb)
         P = weave.reweighting(it, in_, ot, on, p.masking_width * D)
         P_i = weave.single(it, in_, iv)[1]
-        w, W, s = cloth._weights(p, P, P_i, jnp.asarray(wi.z))
+        w, W, s = cloth_model._weights(p, P, P_i, jnp.asarray(wi.z))
         assert np.all(np.asarray(s) == 1.0)
         assert np.all(np.asarray(w) <= np.asarray(W) * (1 + 1e-12))
         np.testing.assert_allclose(np.asarray(W).sum(axis=(-2, -1)), 1.0, rtol=1e-12)
@@ -519,7 +520,7 @@ def test_plot_recipe_writes_pngs(tmp_path):
 def test_cloth_weave_families_are_cloth_with_scaled_curves():
     """cloth_weaves.Params -> cloth.Params: the same BRDF; the satin family at alpha = 32 deg is the Polyester
     front flat thread of Table E.1; alpha is differentiable (the fitter frees it); bad input is named."""
-    from appearance_jax.bsdf import cloth_weaves
+    from appearance_jax.bsdf.cloth import weaves as cloth_weaves
 
     wi, wo = _random_pairs(20, 66)
     for kind in ("plain", "satin", "twill"):

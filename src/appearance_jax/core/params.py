@@ -110,8 +110,10 @@ def _to_array(v):
 
 
 def _label(cls) -> str:
-    """"rough_conductor.Params": every model's class is called Params, so name its module too."""
-    return f"{cls.__module__.rsplit('.', 1)[-1]}.{cls.__name__}"
+    """"rough_conductor.Params": every model's class is called Params, so name its module too
+    (a model that is a package, ``bsdf/cloth/model.py``, by its package: "cloth.Params")."""
+    parts = cls.__module__.split(".")
+    return f"{parts[-2] if parts[-1] == 'model' and len(parts) > 1 else parts[-1]}.{cls.__name__}"
 
 
 def params_class(cls):

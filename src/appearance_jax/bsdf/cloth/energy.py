@@ -37,8 +37,8 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ..bcsdf import thread
-from ..core.quadrature import gauss_legendre, piecewise_rule
+from ...bcsdf import thread
+from ...core.quadrature import gauss_legendre, piecewise_rule
 
 N_THETA_I = 49  # table nodes in theta_i over [-pi/2, pi/2] (3.75 deg apart)
 N_PER_PIECE = 6  # smoothstep Gauss-Legendre nodes per theta_r piece

@@ -62,7 +62,7 @@ factors Table 5.2's albedos absorbed), so bright weaves reflect more than they r
 (up to 4.1 at 89.5 deg for random weaves).
 
 **Thread energy (D-C10, this library's; ``thread_energy``).** The default ``"capped"`` divides
-each tangent sample's f_s by max(1, rho), rho its *exit albedo* (:mod:`.cloth_energy`: the
+each tangent sample's f_s by max(1, rho), rho its *exit albedo* (:mod:`.energy`: the
 fraction of the light the sample intercepts that it sends out of the patch, in the exit measure of
 Eq. 5.20, from one-dimensional tables in theta_i per family): no sample sends out more than it
 intercepts. rho is exact for a flat sample lit in its normal-tangent plane and an upper estimate
@@ -149,7 +149,7 @@ Family parameters are arrays with the family axis last (bands after it for ``alb
 | thread_energy | "capped"             | capped, thesis | -   | D-C10 albedo cap (above) or the thesis' formula   |
 | normalization_floor | "grazing"      | grazing, always, none | - | D-C11 floor of Eq. 5.20's denominator (above) |
 
-Presets (``PRESETS``, :mod:`.cloth_presets`, with the OCR repairs documented there):
+Presets (``PRESETS``, :mod:`.presets`, with the OCR repairs documented there):
 ``linen_plain``, ``silk_crepe_de_chine``, ``polyester_satin_front``, ``polyester_satin_back``,
 ``silk_shot``, ``velvet``. The two imaginary fabrics of Fig. 5.32 (Shantung; asymmetric
 specular peaks) have no parameters in the thesis and are not presets.
@@ -181,14 +181,14 @@ import math
 import jax.numpy as jnp
 import numpy as np
 
-from ..bcsdf import thread
-from ..core import warp
-from ..core.model import Model, boundary, with_bands
-from ..core.params import Bands, integer, param, params_class, Real, static
-from ..core.rng import uniforms
-from ..core.special import erfinv, safe_asin, safe_div, safe_sqrt, smoothstep
-from ..core.vec import Vec3
-from . import cloth_energy, cloth_presets, weave
+from ...bcsdf import thread
+from ...core import warp
+from ...core.model import Model, boundary, with_bands
+from ...core.params import Bands, integer, param, params_class, Real, static
+from ...core.rng import uniforms
+from ...core.special import erfinv, safe_asin, safe_div, safe_sqrt, smoothstep
+from ...core.vec import Vec3
+from . import energy, presets, weave
 
 DEG = math.pi / 180.0
 P_DIFFUSE = 0.2  # probability of the cosine-weighted lobe in the sampler
@@ -345,9 +345,9 @@ def _response(p: Params, wi: Vec3, wo: Vec3):
                           albedo=jnp.asarray(p.albedo)[..., :, None, :], k_d=_fam(p.k_d),
                           gamma_s=_fam(p.gamma_s) * DEG, gamma_v=_fam(p.gamma_v) * DEG)
     if p.thread_energy == "capped":  # D-C10: no sample sends out more than it intercepts
-        tables = cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, jnp.asarray(p.gamma_s) * DEG,
+        tables = energy.exit_tables(p, p.eta, p.albedo, p.k_d, jnp.asarray(p.gamma_s) * DEG,
                                           jnp.asarray(p.gamma_v) * DEG)
-        fs = fs * cloth_energy.cap(cloth_energy.exit_albedo(tables, safe_asin(jnp.clip(it, -1.0, 1.0)), alpha))
+        fs = fs * energy.cap(energy.exit_albedo(tables, safe_asin(jnp.clip(it, -1.0, 1.0)), alpha))
     width = p.masking_width * DEG
     M = weave.masking(in_, iv, on, ov, width) if p.masking else jnp.ones_like(it)
     if p.reweighting:
@@ -514,8 +514,8 @@ def thesis_form(p: Params) -> Params:
 
 
 def preset(name: str, velvet_gamma_s: float = 6.0, **kw) -> Params:
-    """A fabric of Table 5.2 / E.1 (``cloth_presets.TABLE``); ``kw`` overrides fields/options."""
-    return Params(**{**cloth_presets.kwargs(name, velvet_gamma_s=velvet_gamma_s), **kw})
+    """A fabric of Table 5.2 / E.1 (``presets.TABLE``); ``kw`` overrides fields/options."""
+    return Params(**{**presets.kwargs(name, velvet_gamma_s=velvet_gamma_s), **kw})
 
 
 def velvet(gamma_s: float = 6.0, **kw) -> Params:
@@ -523,7 +523,7 @@ def velvet(gamma_s: float = 6.0, **kw) -> Params:
     return preset("velvet", velvet_gamma_s=gamma_s, **kw)
 
 
-PRESETS = {name: preset(name) for name in cloth_presets.TABLE}
+PRESETS = {name: preset(name) for name in presets.TABLE}
 
 MODEL = Model(
     name="cloth",

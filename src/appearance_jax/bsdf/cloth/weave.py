@@ -51,7 +51,7 @@ from typing import NamedTuple
 
 import jax.numpy as jnp
 
-from ..core.special import safe_atan2, safe_sqrt
+from ...core.special import safe_atan2, safe_sqrt
 
 DEG = math.pi / 180.0
 

@@ -1,6 +1,6 @@
-"""Cloth weave families with few parameters, for fitting :mod:`.cloth` to measured BRDFs.
+"""Cloth weave families with few parameters, for fitting :mod:`appearance_jax.bsdf.cloth` to measured BRDFs.
 
-:mod:`.cloth` takes whole tangent curves (offsets and lengths per family): flexible, but a
+:mod:`appearance_jax.bsdf.cloth` takes whole tangent curves (offsets and lengths per family): flexible, but a
 least-squares fit of every control point of an isotropic measurement is degenerate. Here a
 weave *family* fixes the shape of the curves and the coverages, and one angle ``alpha`` (the
 largest tangent offset) scales them; the two thread families keep their own thread
@@ -16,10 +16,10 @@ twill    :func:`.weave.twill` over 2 (this library's twill curve)   ramp {-a, a}
 =======  =========================================================  ==============  =========
 
 ``n_rotations`` (default 8) averages over the weave rotated by 360 k / K deg
-(:func:`.cloth._rotation_average`): a measurement that assumes isotropy, such as MERL's (the
+(:func:`.model._rotation_average`): a measurement that assumes isotropy, such as MERL's (the
 fabric is wrapped around a sphere or cylinder and every orientation is seen), is compared
 with the orientation-averaged model. The BRDF form and the energy gate are those of
-:mod:`.cloth` (``eval`` = R / N.w_i, 1/sr).
+:mod:`appearance_jax.bsdf.cloth` (``eval`` = R / N.w_i, 1/sr).
 
 | parameter        | default | range      | unit | meaning                                  |
 |------------------|---------|------------|------|------------------------------------------|
@@ -35,7 +35,7 @@ with the orientation-averaged model. The BRDF form and the energy gate are those
 
 Example::
 
-    from appearance_jax.bsdf import cloth_weaves
+    from appearance_jax.bsdf.cloth import weaves as cloth_weaves
     p = cloth_weaves.Params(weave="twill", alpha=20.0)
     f = cloth_weaves.eval(p, wi, wo)            # (..., bands), 1/sr
     q = cloth_weaves.to_cloth(p)                # the equivalent cloth.Params
@@ -45,9 +45,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..core.model import Model, boundary
-from ..core.params import Bands, integer, param, params_class, Real, static
-from . import cloth, weave
+from ...core.model import Model, boundary
+from ...core.params import Bands, integer, param, params_class, Real, static
+from . import model, weave
 
 KNEE_RATIO = 18.0 / 32.0  # Polyester Satin Charmeuse front (Table E.1): knee 18 deg of 32
 
@@ -77,26 +77,26 @@ class Params:
     n_samples: int = static(16, convert=integer(1, 1024), doc="T, samples per tangent curve")
 
 
-def to_cloth(p: Params) -> cloth.Params:
-    """The :class:`.cloth.Params` of this weave (works on traced values inside jit)."""
+def to_cloth(p: Params) -> model.Params:
+    """The :class:`.model.Params` of this weave (works on traced values inside jit)."""
     curves, coverage = _curves(p.weave, p.alpha)
     albedo = jnp.stack(jnp.broadcast_arrays(jnp.atleast_1d(p.albedo_1), jnp.atleast_1d(p.albedo_2)))
     pair = lambda a, b: jnp.stack(jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b)))  # noqa: E731
-    return cloth.from_weave(curves, coverage, eta=p.eta, albedo=albedo, k_d=pair(p.k_d_1, p.k_d_2),
+    return model.from_weave(curves, coverage, eta=p.eta, albedo=albedo, k_d=pair(p.k_d_1, p.k_d_2),
                             gamma_s=pair(p.gamma_s_1, p.gamma_s_2), gamma_v=pair(p.gamma_v_1, p.gamma_v_2),
                             n_samples=p.n_samples, n_rotations=p.n_rotations)
 
 
 def _eval(p: Params, wi, wo):
-    return cloth.eval.kernel(to_cloth(p), wi, wo)
+    return model.eval.kernel(to_cloth(p), wi, wo)
 
 
 def _pdf(p: Params, wi, wo):
-    return cloth.pdf.kernel(to_cloth(p), wi, wo)
+    return model.pdf.kernel(to_cloth(p), wi, wo)
 
 
 def _sample(p: Params, wi, u):
-    return cloth.sample.kernel(to_cloth(p), wi, u)
+    return model.sample.kernel(to_cloth(p), wi, u)
 
 
 eval = boundary(_eval, Params)
