@@ -23,65 +23,16 @@ arrays with a trailing bands axis (RGB); ``bottom_albedo`` likewise.
 | w_g       | 1.0     | [0, 1]  | 1    | weight of lobe 1 (1: single lobe HG(g1))               |
 | bottom_albedo ρ | -- | [0, 1] | 1    | Lambertian bottom, f = ρ/π, per band                   |
 
-Method
-------
-*Angular discretisation.* Cosines: ``n_nodes`` Gauss-Legendre nodes μ_j on (0, 1) per
-hemisphere ("double Gauss"). Operators act on radiance vectors with the measure
-``c_j = 2π μ_j w_j`` (the 2π is the azimuth integral of a Fourier mode, see below), and
-are stored as BRDF-like *kernels* K[out, in] (operator = K C, C = diag(c)). Composition
-of two operators is ``A C B``.
-
-*Azimuth.* The phase function is expanded in Legendre polynomials with moments
-χ_l = w_g g1^l + (1 - w_g) g2^l, l < 2 n_nodes (spec M12 "Legendre coefficients g^l"), so
-that the double-Gauss rule integrates it exactly (energy conservation of the discrete
-scattering operator, also for off-node incident cosines). The addition theorem splits it
-into Fourier modes m = 0 .. n_fourier-1 with kernels
-
-    p_m(μ_out, μ_in) = sum_l (2l+1)/(4π) χ_l Λ_l^m(μ_out) Λ_l^m(μ_in) (±1)^(l+m),
-
-Λ_l^m the normalised associated Legendre functions, sign (-1)^(l+m) for reflection
-(one cosine changes sign), + for transmission. Azimuths are those of the *propagation*
-directions internally, so that all compositions are mode-wise (the azimuth convolution
-of cos(mΔ) kernels gives the factor 2π in ``c``). At the end, with the azimuths of
-directions pointing away (Δφ = φo - φi), ``f = sum_m (2 - δ_m0) (-1)^m K_m cos(m Δφ)``:
-the in-plane mirror configuration (Δφ = π) is the forward direction of propagation.
-
-*Starting layer and doubling.* Each slab of thickness t starts from a layer of thickness
-τ0 = t 2^-K (K = ``n_doublings``, static, default 30) whose R and T are the exact
-single-scattering kernels (spec M35 with σ_t = 1):
-
-    R0 = ϖ p_m^R [1 - e^{-τ0(1/μi + 1/μo)}] / (μi + μo)
-    T0 = ϖ p_m^T (e^{-τ0/μo} - e^{-τ0/μi}) / (μo - μi)      (finite limit at μo = μi)
-
-plus the direct beam e = exp(-τ/μ) carried as a diagonal. The start misses O(τ0^2)
-multiple scattering per elementary layer, i.e. a relative error ~50 τ0 of the result. The
-direct beam exp(-τ0 2^j/μ) is recomputed at every level rather than squared. Doubling
-(layer on a copy of itself; a homogeneous slab is up-down symmetric) then K times, with the
-general adding equations below. Because τ0 scales with t, t = 0 gives R = T = 0 and
-e = 1 exactly: a zero-thickness layer is an exact no-op.
-
-*Adding* (layer 1 over layer 2; E = diag(e); * = illuminated from below):
-
-    W  = (I - R2 C R1* C)^{-1} R2,         V = (I - R1* C R2 C)^{-1} R1*
-    R  = R1  + (E1 + T1* C) W (E1 + C T1)
-    T  = E2 T1 + T2 E1 + T2 C T1 + (E2 + T2 C) V C R2 (E1 + C T1)
-    R* = R2* + (E2 + T2 C) V (E2 + C T2*)
-    T* = E1 T2* + T1* E2 + T1* C T2* + (E1 + T1* C) W C R1* (E2 + C T2*)
-
-(obtained from the operator series T2 (I - R1* R2)^{-1} T1 etc. with the push-through
-identity and C E = E C, so that the delta-function direct beam never has to be written
-as a kernel). The Lambertian bottom is a layer with R = ρ/π in mode 0 only and no
-transmission. The linear solves use :func:`appearance_jax.core.linalg.solve_diagonally_dominant`
-(no LAPACK): I - R C R' C has non-negative off-diagonal entries and row sums < 1 (a
-reflection operator's row sums are albedos <= 1 and a layer of positive thickness or
-ϖ < 1 loses energy), so it is diagonally dominant.
-
-*Query angles.* Arbitrary (μi, μo) are appended to the node list with **zero** quadrature
-weight: every inner sum runs over the Gauss nodes only, so the extra nodes do not change
-any integral, and their rows/columns are carried through all products exactly (no
-interpolation error). Cost per Fourier mode and band: O(K (n + q)^2 n) with q = 2 x
-(number of query pairs); evaluate large tables in chunks, or on a cosine grid with
-:func:`fourier_kernels`.
+Method (the derivation, written out in docs/cosmetics.md): ``n_nodes`` Gauss-Legendre
+cosines per hemisphere ("double Gauss"); the phase function in Legendre moments
+χ_l = w_g g1^l + (1 - w_g) g2^l, split into ``n_fourier`` azimuthal Fourier modes; each slab
+starts from a layer of thickness t 2^-K (K = ``n_doublings``, default 30) with the exact
+single-scattering kernels (spec M35), doubled K times, then the slabs and the Lambertian
+bottom are combined with the adding equations; the direct beam is carried as a diagonal,
+never as a kernel. A zero-thickness layer is an exact no-op. Arbitrary query cosines are
+appended to the nodes with zero quadrature weight (no interpolation error). Cost per
+Fourier mode and band: O(K (n + q)^2 n) with q = 2 x (number of query pairs); evaluate
+large tables in chunks, or on a cosine grid with :func:`fourier_kernels`.
 
 Accuracy: the defaults ``n_nodes = 24`` and ``n_fourier = 24`` suit lobes up to g ~ 0.8
 (measured numbers: docs/cosmetics.md). Use float64 (``jax_enable_x64``): the starting layer
