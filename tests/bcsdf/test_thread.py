@@ -160,3 +160,19 @@ def test_bad_parameter_is_named():
         thread.eval_angles(thread.Params(k_d=1.5), 0.1, 0.2, 0.3)
     with pytest.raises(ValueError, match=r"gamma_s = 0 .*\(0, 90\]"):
         thread.eval_angles(thread.Params(gamma_s=0.0), 0.1, 0.2, 0.3)
+
+
+def test_registered_model_is_the_thread_in_the_fiber_frame():
+    """``cloth_thread`` (thread.MODEL) evaluates in the fiber frame of bcsdf: x = tangent,
+    theta from the normal plane and phi = atan2(w.z, w.y) (core.frame.fiber_angles)."""
+    from appearance_jax import registry
+    from appearance_jax.core.frame import fiber_angles
+
+    m = registry.get("cloth_thread")
+    assert m is thread.MODEL and m.kind == "bcsdf" and m.reciprocal
+    _, _, _, wi, wo = _random_frame_dirs(2, 64)
+    th_i, ph_i = (np.asarray(a) for a in fiber_angles(wi))
+    th_r, ph_r = (np.asarray(a) for a in fiber_angles(wo))
+    a = np.asarray(m.eval(POLY_TWISTED, wi, wo))
+    b = np.asarray(thread.eval_angles(POLY_TWISTED, th_i, th_r, ph_i - ph_r))
+    np.testing.assert_allclose(a, b, rtol=1e-10)
