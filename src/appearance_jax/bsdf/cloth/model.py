@@ -298,7 +298,9 @@ def _patch_gate(in_, weights, wi_z, floor_weights=None, strength=0.0):
     e = jnp.sum(weights * lit, axis=(-2, -1))
     if floor_weights is not None:
         e = jnp.maximum(e, strength * jnp.sum(floor_weights * lit, axis=(-2, -1)))
-    ok = e > wi_z
+    # e > 0 as well: below the horizon (wi_z < 0, value 0) e can be 0, and wi_z / 0 = -inf there
+    # made the masked response NaN and every gradient NaN; above the horizon e > wi_z > 0 anyway
+    ok = (e > wi_z) & (e > 0.0)
     return jnp.where(ok, wi_z / jnp.where(ok, e, 1.0), 1.0)
 
 

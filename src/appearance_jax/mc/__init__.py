@@ -1,1 +1,0 @@
-"""Monte Carlo estimators: the position-free layered random walk (:mod:`.layered`)."""
