@@ -11,6 +11,7 @@ Run it on any model record with the fields of :class:`appearance_jax.core.model.
     testing.assert_sampling(m, p)
     testing.assert_chi2(m, p)
     testing.assert_gradients(lambda q: m.eval(q, wi, wo).sum(), p)
+    testing.assert_special_directions(m, p, dtype="float32")
 
 Every ``check_*`` returns a result dataclass (numbers, ``passed``, ``message``); the
 ``assert_*`` twin raises ``AssertionError(message)`` on failure. Estimators are vectorised
@@ -41,5 +42,12 @@ from .properties import (  # noqa: F401
     reciprocity_pairs,
 )
 from .results import CheckResult, sidak, z_threshold  # noqa: F401
+from .special import (  # noqa: F401
+    SPECIAL_DIRECTIONS,
+    SpecialDirectionsResult,
+    assert_special_directions,
+    check_special_directions,
+    special_pairs,
+)
 
 check_chi2 = chi2_test

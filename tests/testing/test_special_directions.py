@@ -1,0 +1,50 @@
+"""Every registered model at the special directions (normal, antinormal, horizon, grazing
++-1e-7, all 36 pairs among them): finite values and pdfs, 0 below the horizon for
+reflection BSDFs, finite gradients w.r.t. every floating-point field; float32 and float64
+(appearance_jax.testing.check_special_directions). Expensive models run with small static
+sample counts: the singular directions do not depend on them."""
+
+import numpy as np
+import pytest
+
+from appearance_jax import registry, testing
+from appearance_jax.bsdf import lambert
+from appearance_jax.core.model import Model, boundary, with_bands
+
+# static settings that keep a model cheap (one eval and one grad per model and dtype)
+CHEAP = {
+    "cosmetics": dict(n_samples=4, max_bounces=8),
+    "cloth": dict(n_samples=2),
+    "cloth_weave": dict(n_samples=2),
+    "huang_hair": dict(n_intervals=4, n_paths=1),
+}
+
+MODELS = {m.name: m for m in registry.models()}
+
+
+@pytest.mark.parametrize("dtype", ["float32", "float64"])
+@pytest.mark.parametrize("name", sorted(MODELS))
+def test_special_directions(name, dtype):
+    model = MODELS[name]
+    testing.assert_special_directions(model, model.Params(**CHEAP.get(name, {})), dtype=dtype)
+
+
+def test_the_check_catches_nan_gradients_and_light_from_below():
+    """A lambert whose value is 0 below the horizon but whose gradient is NaN there (a masked
+    sqrt of a negative number), and one that reflects light from below: both fail."""
+    import jax.numpy as jnp
+
+    def nan_grad(p, wi, wo):
+        up = (wi.z > 0) & (wo.z > 0)
+        return jnp.where(with_bands(up), p.reflectance * with_bands(jnp.sqrt(wi.z * wo.z)) / jnp.pi, 0.0)
+
+    def from_below(p, wi, wo):
+        return jnp.broadcast_to(p.reflectance / jnp.pi, jnp.shape(wi.z) + (1,)) * jnp.ones((1,))
+
+    P = lambert.Params
+    for fn, what in ((nan_grad, "non-finite d/d.reflectance"), (from_below, "below the horizon")):
+        m = Model(name="broken", kind="bsdf", Params=P, eval=boundary(fn, P), sample=None, pdf=None,
+                  summary="broken on purpose", source="test")
+        r = testing.check_special_directions(m, P(reflectance=0.5), dtype=np.float64)
+        assert not r.passed and what in r.message, r.message
+    assert testing.check_special_directions(lambert.MODEL, P(reflectance=0.5), dtype=np.float32).passed
