@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from appearance_jax import flatland as fl
-from appearance_jax.bcsdf import fiber, huang
+from appearance_jax.bcsdf import fiber, huang, huang_sampling
 from appearance_jax.core.frame import fiber_angles, fiber_direction
 from appearance_jax.core.quadrature import gauss_legendre
 
@@ -22,7 +22,7 @@ N = 2 ** 18
 THETA_I, PHI_I = 0.3, 0.4
 N_TH, N_PH, N_SUB = 10, 16, 3     # equal-solid-angle bins in sin(theta_o) x phi_o; sub-nodes per axis
 
-_sample_path = huang._sample_path_jit     # the public sampler's compiled stage
+_sample_path = huang_sampling._sample_path_jit     # the public sampler's compiled stage
 
 
 def _uniforms(seed, n_u, n=N):
@@ -66,7 +66,7 @@ def _bin_nodes():
 
 
 def _histograms(p, seed):
-    wo, w, lobe, P, A, Vis, good = _sample_path(p, _wi(), _uniforms(seed, huang._n_uniforms(p)))
+    wo, w, lobe, P, A, Vis, good = _sample_path(p, _wi(), _uniforms(seed, huang_sampling._n_uniforms(p)))
     w, good = np.asarray(w[:, 0]), np.asarray(good)
     assert np.all(np.isfinite(w)) and np.all(w >= 0)
     idx = _bin_index(wo)
@@ -138,7 +138,7 @@ def test_lobe_attenuations_probabilities_and_weights():
     (stratified lobe uniforms over one fixed path); weight = A_p Vis_p / P_p, i.e.
     sum_q A_q x G for gray absorption."""
     p = huang.Params(roughness=1e-3, tilt=0.0, sigma_a=_SIGMA, **_STATIC)
-    u = list(_uniforms(5, huang._n_uniforms(p)))
+    u = list(_uniforms(5, huang_sampling._n_uniforms(p)))
     hs = np.linspace(-0.8, 0.8, N)
     u[0] = jnp.asarray(0.5 * (hs + 1))                                 # h = 2 u - 1 (circle: D_i = 1)
     wo, w, lobe, P, A, Vis, good = _sample_path(p, _wi(), tuple(u))
@@ -149,7 +149,7 @@ def test_lobe_attenuations_probabilities_and_weights():
     err = np.percentile(np.abs(A - ref[:3]).max(axis=2), 99, axis=1)
     print("99th percentile of |A_p - A_p(smooth)| per lobe:", err)
     assert np.all(err < 1e-3)
-    lum = A @ np.asarray(huang.LUMINANCE_RGB)
+    lum = A @ np.asarray(huang_sampling.LUMINANCE_RGB)
     np.testing.assert_allclose(P, lum / lum.sum(0), rtol=1e-12)
     # weight of the chosen lobe
     onehot = np.arange(3)[:, None] == np.asarray(lobe)[None]
@@ -159,7 +159,7 @@ def test_lobe_attenuations_probabilities_and_weights():
     np.testing.assert_allclose(np.asarray(w)[g], (Ak * (Vk / Pk)[:, None])[g], rtol=1e-10)
     # one fixed path (h = 0.3), stratified lobe uniforms: the frequencies are P_p to 1/N
     p2 = huang.Params(roughness=0.3, tilt=3 * DEG, sigma_a=_SIGMA, **_STATIC)
-    u = [jnp.full(N, 0.1) for _ in range(huang._n_uniforms(p2))]
+    u = [jnp.full(N, 0.1) for _ in range(huang_sampling._n_uniforms(p2))]
     u[0] = jnp.full(N, 0.65)
     u[1] = jnp.asarray((np.arange(N) + 0.5) / N)
     _, w, lobe, P, A, Vis, good = _sample_path(p2, _wi(), tuple(u))
@@ -176,7 +176,7 @@ def test_public_sample_protocol():
     samples (a stage compiled by the histogram test: same shapes). The with_pdf=True path
     (pdf = 0 exactly at failed samples) is in test_public_sample_with_pdf (slow)."""
     p = PARAMS["circle"]
-    u = _uniforms(21, huang._n_uniforms(p))
+    u = _uniforms(21, huang_sampling._n_uniforms(p))
     wo, w, none = huang.sample(p, _wi(), u, with_pdf=False)
     _, w2, _ = huang.sample(p, _wi(), u, with_pdf=False)
     assert none is None
@@ -219,7 +219,7 @@ def test_mean_weight_per_lobe_matches_flatland(name):
     power fraction does not: both are compared as power (weight x D_o / D_i)."""
     p = PARAMS[name].replace(n_lobes=4)
     e = float(p.eccentricity)
-    wo, w, lobe, *_ = _sample_path(p, _wi(), _uniforms(31, huang._n_uniforms(p)))
+    wo, w, lobe, *_ = _sample_path(p, _wi(), _uniforms(31, huang_sampling._n_uniforms(p)))
     D = lambda phi: np.sqrt(1 - e * e * np.sin(phi) ** 2)  # noqa: E731
     w = np.asarray(w) * (D(np.asarray(fiber_angles(wo)[1])) / D(PHI_I))[:, None]
     lobe = np.asarray(lobe)

@@ -10,7 +10,8 @@ phi_o - phi_i = Phi(p, h) = 2 p gamma_t - 2 gamma_i + p pi (d'Eon et al. 2011; p
 Lengths, and so absorption coefficients, are per unit **radius**.
 
 Contents: Bravais' effective indices (Marschner et al. 2003, App. B), the projected half
-width of an elliptical fiber (Eq. 4.27, Huang 2022), the smooth-cylinder exit azimuths and
+width of an elliptical fiber (Huang Eq. 4.27) and the geometry of its cross-section (points,
+normals, arc length, chords, entry points and visible arcs; Huang 2022 Sec. 4.3), the smooth-cylinder exit azimuths and
 lobe attenuations (spec seed-000 M18, with the corrected chord 2 cos(gamma_t)/cos(theta_t),
 Eq. 4.17 / [T:1110], Huang 2022), and absorption from melanin concentrations or from a
 desired colour.
@@ -20,7 +21,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..core.special import safe_asin, safe_sqrt
+from ..core.frame import Frame
+from ..core.special import safe_acos, safe_asin, safe_sqrt
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric
 
@@ -74,6 +76,104 @@ def half_width(eccentricity, phi):
     Huang 2022; the same ellipse as :func:`flatland.fiber`)."""
     s = jnp.sin(phi)
     return safe_sqrt(1.0 - eccentricity * eccentricity * s * s)
+
+
+# ----------------------------------------------------------------------------------
+# the elliptical cross-section y^2 / b^2 + z^2 = 1 (Huang 2022, Sec. 4.3.3): points
+# (b cos g, sin g) of the ellipse parameter g (Huang's gamma), b = sqrt(1 - e^2)
+
+_TINY = 1e-12
+
+
+def minor_axis(eccentricity):
+    """b = sqrt(1 - e^2): the semi-axis along y of the cross-section (semi-major axis 1 along z)."""
+    return safe_sqrt(1.0 - eccentricity * eccentricity)
+
+
+def to_gamma(phi, b):
+    """Ellipse parameter gamma of the point whose outward normal has azimuth phi."""
+    return jnp.arctan2(jnp.sin(phi), b * jnp.cos(phi))
+
+
+def to_phi(gamma, b):
+    """Azimuth of the outward normal at parameter gamma: atan2(b sin g, cos g)."""
+    return jnp.arctan2(b * jnp.sin(gamma), jnp.cos(gamma))
+
+
+def ellipse_point(g, b):
+    """(y, z) of the point of parameter g: (b cos g, sin g)."""
+    return b * jnp.cos(g), jnp.sin(g)
+
+
+def ellipse_normal(py, pz, b):
+    """Outward unit normal (n_y, n_z) (the macronormal) at the point (py, pz) of the ellipse."""
+    ny, nz = py / (b * b), pz
+    r = jnp.sqrt(ny * ny + nz * nz)
+    return ny / r, nz / r
+
+
+def arc_element(g, b):
+    """dl / dg = sqrt(1 - e^2 sin^2 g): arc length per unit ellipse parameter (Eq. 4.26)."""
+    return safe_sqrt(1.0 - (1.0 - b * b) * jnp.sin(g) ** 2)
+
+
+def ellipse_chord(py, pz, d: Vec3, b):
+    """Parameter s of the second intersection of p + s (d.y, d.z) with the ellipse (p on it).
+    For a unit 3D direction d this is the 3D path length."""
+    A = d.y * d.y / (b * b) + d.z * d.z
+    B = 2.0 * (py * d.y / (b * b) + pz * d.z)
+    ok = A > _TINY
+    s = jnp.where(ok, -B / jnp.where(ok, A, 1.0), 0.0)
+    return jnp.maximum(s, 0.0)
+
+
+def entry_gamma(wi: Vec3, h, b):
+    """Ellipse parameter of the entry point of the ray from ``wi`` at signed offset
+    ``h`` in [-D_i, D_i] (2D line-ellipse intersection on the lit side; for a circle
+    gamma = phi_i + asin h, spec seed-001 §1.3.2). Returns (gamma, valid)."""
+    r = jnp.sqrt(wi.y * wi.y + wi.z * wi.z)
+    ok = r > _TINY
+    r = jnp.where(ok, r, 1.0)
+    uy, uz = wi.y / r, wi.z / r           # towards the light
+    vy, vz = -uz, uy
+    A = uy * uy / (b * b) + uz * uz
+    B = 2.0 * h * (vy * uy / (b * b) + vz * uz)
+    C = h * h * (vy * vy / (b * b) + vz * vz) - 1.0
+    s = (-B + safe_sqrt(B * B - 4.0 * A * C)) / (2.0 * A)
+    py, pz = h * vy + s * uy, h * vz + s * uz
+    return jnp.arctan2(pz, py / b), ok
+
+
+def visible_gamma_interval(theta, phi, tilt, b):
+    """Entry parameters gamma seen by direction (theta, phi) from both the macro- and the
+    mesonormal of cuticle tilt ``tilt``: cos(phi - phi_m) > max(0, -tan(tilt) tan(theta))
+    (spec seed-001 §1.3.3). Returns (lo, hi) with hi >= lo (empty: hi = lo) and lo unwrapped
+    near gamma(phi)."""
+    c = jnp.maximum(0.0, -jnp.tan(tilt) * jnp.tan(theta))
+    w = safe_acos(jnp.minimum(c, 1.0))
+    gc = to_gamma(phi, b)
+    lo = gc - jnp.mod(gc - to_gamma(phi - w, b), 2.0 * jnp.pi)
+    hi = gc + jnp.mod(to_gamma(phi + w, b) - gc, 2.0 * jnp.pi)
+    # w = 0: the mods may return 2 pi - eps; collapse
+    lo = jnp.where(w > 0, lo, gc)
+    hi = jnp.where(w > 0, hi, gc)
+    return lo, hi
+
+
+def intersect_intervals(lo1, hi1, lo2, hi2):
+    """Intersection of two intervals of the ellipse parameter, the second shifted by a multiple
+    of 2 pi towards the first; (lo, hi) with hi >= lo (empty: hi = lo)."""
+    m1, m2 = 0.5 * (lo1 + hi1), 0.5 * (lo2 + hi2)
+    shift = wrap_pi(m2 - m1) - (m2 - m1)
+    lo2, hi2 = lo2 + shift, hi2 + shift
+    lo, hi = jnp.maximum(lo1, lo2), jnp.minimum(hi1, hi2)
+    return lo, jnp.maximum(hi, lo)
+
+
+def meso_frame(m: Vec3):
+    """Local frame with normal ``m`` (a mesonormal) and tangent along the fiber axis x."""
+    one = jnp.ones_like(m.x)
+    return Frame.from_normal_tangent(m, Vec3(one, 0.0 * one, 0.0 * one))
 
 
 def exit_azimuth(p, h, eta_prime):
