@@ -1,6 +1,6 @@
 """The thread energy cap of the cloth model (this library's decision D-C10; not in the thesis).
 
-Sadeghi's thread BCSDF (Eq. 5.11) is a hand-fitted shading model, not normalised: its surface
+Sadeghi's thread BCSDF (Sadeghi Eq. 5.11) is a hand-fitted shading model, not normalised: its surface
 term has no 1/4 in azimuth (Marschner's N_R has one) and its volume term is the semi-infinite
 single-scattering form without Chandrasekhar's 1/(4 pi), the factors Table 5.2's albedos absorbed.
 Seen through the weave this is harmless at moderate incidence (the presets reflect 0.1-0.2 of
@@ -9,7 +9,7 @@ Fresnel factor of the surface term -> 1 and the volume term's 1/(cos theta_i + c
 a bright weave then sends out more light than it receives (albedo 1.3-3.9 near grazing).
 
 The cap: each tangent sample's f_s is divided by max(1, rho), rho the fraction of the light the
-sample intercepts that it sends out of the patch, in the exit measure of Eq. 5.20 (masking M_r,
+sample intercepts that it sends out of the patch, in the exit measure of Sadeghi Eq. 5.20 (masking M_r,
 projected onto N):
 
     rho(theta_i, alpha) = int f_s(theta_i, theta_r, phi_d = -phi_r) M_r (N . w_r) dw_r,
@@ -26,8 +26,8 @@ M(w_i, w_r) = M_r exactly; an off-plane light meets the same lobes at smaller M_
 (phi_r in [-pi/2, pi/2]; with ``masking=False``, M_r = 1 and phi_r over the whole circle). The tables are computed from the family parameters at every call
 (differentiable; ~50 theta_i nodes x 54 theta_r x 8 phi_r thread evaluations per family, small
 next to one eval batch) and interpolated linearly in theta_i. Where rho <= 1 the model is the
-thesis' unchanged; the measured effect on the presets and the albedo bounds are in the cloth
-module's docstring.
+thesis' unchanged; the measured effect on the presets and the albedo bounds are in
+``docs/cloth.md``.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Sadeghi's practical cloth model: a weave of thread families scattered by the thread BCSDF,
-with tangent curves, masking/shadowing and reweighting (Sadeghi 2011 Ch. 5, Eqs. 5.12-5.20,
-App. E; Sadeghi et al. 2013, "A practical microcylinder appearance model for cloth
+with tangent curves, masking/shadowing and reweighting (Sadeghi 2011 Ch. 5, Sadeghi Eqs.
+5.12-5.20, App. E; Sadeghi et al. 2013, "A practical microcylinder appearance model for cloth
 rendering", ACM TOG 32(2)). Spec seed-002 §1.4.
 
 The smallest repeating patch of the weave holds J thread families (J = 2 in the thesis: "the
@@ -10,119 +10,53 @@ surface tangent x, family 2 along y = N x x), covers the fraction ``coverage[j]`
 patch, and has a tangent curve (``offsets``, ``lengths``; :mod:`.weave`) sampled at T =
 ``n_samples`` points C_j. Each tangent sample t(alpha) = cos(alpha) u_j + sin(alpha) N with
 local normal n(alpha) = -sin(alpha) u_j + cos(alpha) N and v_j = N x u_j scatters with the thread
-BCSDF f_s of :mod:`appearance_jax.bcsdf.thread` (Eq. 5.11) with family j's parameters, is
-masked by M(t) (Eqs. 5.14-5.16) and reweighted by its projected length P(t) (Eqs. 5.18-5.19):
+BCSDF f_s of :mod:`appearance_jax.bcsdf.thread` (Sadeghi Eq. 5.11) with family j's parameters,
+is masked by M(t) (Sadeghi Eqs. 5.14-5.16) and reweighted by its projected length P(t) (Sadeghi
+Sadeghi Eqs. 5.18-5.19):
 
     R(w_i, w_r) = sum_j a_j [sum_{t in C_j} f_s(t, w_i, w_r) M(t) P(t) cos theta_i(t)] / sum_{k in C} P(k)   (5.12, 5.20)
 
 with C = C_1 u ... u C_J (J T samples) and cos theta_i(t) = sqrt(1 - (w_i.t)^2) the *thread*
-(curve-irradiance) cosine of Eq. 5.6.
+(curve-irradiance) cosine of Sadeghi Eq. 5.6.
 
-**Output convention (decision D-C4).** The thesis writes L_r(w_r) = int L_i(w_i) R(w_i, w_r)
-dw_i (Eq. 5.20): R is a *radiance response* per unit solid angle of incident light, with no
-N.w_i; it is :func:`radiance_response`. A measured BRDF is defined by
-L_r = int f L_i (N.w_i) dw_i, so the BRDF of the model is
+**Output convention (D-C4).** The thesis' L_r(w_r) = int L_i(w_i) R(w_i, w_r) dw_i (Sadeghi
+Sadeghi Eq. 5.20) makes R a *radiance response* with no N.w_i (:func:`radiance_response`); :func:`eval`
+returns the BRDF
 
     f(w_i, w_r) = R(w_i, w_r) / (N . w_i)                           (1/sr)
 
-and that is what :func:`eval` returns (and what :mod:`appearance_jax.fit` fits against
-gonioreflectometer and MERL tables, which are BRDFs). ``f cos theta_o`` is then the
-integrand of the albedo. Neither form is reciprocal (cos theta_i(t) / (N.w_i) is
-asymmetric), although f_s, M and P each are: ``MODEL.reciprocal = False``.
+(what gonioreflectometer and MERL tables measure; ``f cos theta_o`` is the integrand of the
+albedo). Neither form is reciprocal (cos theta_i(t) / (N.w_i) is asymmetric), although f_s, M
+and P each are: ``MODEL.reciprocal = False``.
 
-**Energy (this library's decision; not in the thesis).** Taken literally, the albedo
-a(w_i) = int f cos theta_o dw_o is not bounded by 1 near grazing incidence: tangents that stand
-out of the surface plane (velvet's -90..-50 deg, or any offset alpha != 0 facing the light)
-intercept max(n(alpha).w_i, 0) = M(t, w_i) cos theta_i(t) > 0 while N.w_i -> 0, so f ~ 1/(N.w_i)
-(the thesis' P reweights tangents against each other and is normalised away by sum P, and
-there is no shadowing between tilted samples). The default ``incident_cosine="patch"`` gates
-the response by min(1, N.w_i / E), E the weave's average intercepted light per unit area
-(same weights as Eq. 5.20; :func:`_patch_gate`): a flat patch cannot intercept more than
-N.w_i. Flat tangents (alpha = 0) intercept exactly N.w_i, so the gate only acts on tilted ones
-facing a grazing light; below ~75 deg incidence it is 1 for every preset.
-``incident_cosine="thread"`` is the thesis' formula. Measured albedo maximum over R, G, B
-(T = 32, 128 x 256 quadrature, light azimuth 45 deg from family 1), "thread" / "patch" (the
-thread energy cap below changes none of these numbers; the normalisation floor below lowers
-the 85 and 89 deg columns):
+**Energy (this library's decisions; not in the thesis).** Taken literally, the albedo exceeds 1
+near grazing incidence. Three options bound it; :func:`thesis_form` switches all three off:
 
-| preset                | 0 deg         | 60 deg        | 75 deg        | 85 deg        | 89 deg        |
-|-----------------------|---------------|---------------|---------------|---------------|---------------|
-| linen_plain           | 0.136 / 0.136 | 0.180 / 0.180 | 0.262 / 0.262 | 0.598 / 0.598 | 2.57 / 0.655  |
-| silk_crepe_de_chine   | 0.086 / 0.086 | 0.157 / 0.157 | 0.291 / 0.288 | 0.963 / 0.401 | 6.15 / 0.469  |
-| polyester_satin_front | 0.090 / 0.090 | 0.127 / 0.127 | 0.198 / 0.198 | 0.592 / 0.346 | 4.24 / 0.376  |
-| polyester_satin_back  | 0.103 / 0.103 | 0.148 / 0.148 | 0.211 / 0.211 | 0.529 / 0.340 | 3.37 / 0.373  |
-| silk_shot             | 0.143 / 0.143 | 0.204 / 0.204 | 0.364 / 0.364 | 1.167 / 0.632 | 7.62 / 0.716  |
-| velvet                | 0.001 / 0.001 | 0.031 / 0.031 | 0.104 / 0.075 | 0.418 / 0.108 | 2.33 / 0.124  |
+- ``incident_cosine="patch"`` (default; ``"thread"`` is the thesis' formula) gates the response
+  by min(1, N.w_i / E), E the weave's average intercepted light per unit area (the weights of
+  Sadeghi Eq. 5.20; :func:`_patch_gate`): it acts only on tilted tangents facing a grazing light
+  and is 1 below ~75 deg incidence for every preset.
+- ``thread_energy="capped"`` (D-C10; ``"thesis"``) divides each tangent sample's f_s by
+  max(1, rho), rho its exit albedo (:mod:`.energy`): no sample sends out more than it intercepts.
+  Where every rho <= 1 the model is the thesis' (bit-identical).
+- ``normalization_floor="grazing"`` (D-C11; ``"always"``, ``"none"`` = Sadeghi Eq. 5.20) raises
+  Sadeghi Eq. 5.20's denominator sum_k P(t_k, w_i, w_r) to at least s F, F = sum_k a_k P(t_k, w_i), with s
+  ramped smoothly (smoothstep in cos theta_i) from 0 at 75 deg to 1 at 85 deg incidence; the
+  patch gate's E becomes the larger of its Sadeghi Eq. 5.20 value and s E_W (the intercepted light under
+  the floor's weights). With s = 1 and the cap the albedo is <= 1 by construction; below 75 deg the
+  model is the thesis' normalisation, bit for bit. With ``reweighting=False`` the floor does nothing.
 
-With the light along a thread family (azimuth 0 or 90 deg) the gate alone leaves 1.30 at 89 deg
-(silk_shot): the thread BCSDF itself is not normalised (its surface term has no 1/4 in azimuth and
-its Fresnel factor -> 1 when the light runs along the thread; its volume term (Eq. 5.9) is the
-semi-infinite single-scattering form in *thread* cosines without Chandrasekhar's 1/(4 pi), the
-factors Table 5.2's albedos absorbed), so bright weaves reflect more than they receive near grazing
-(up to 4.1 at 89.5 deg for random weaves).
+The measured albedos, the effect of each decision on the presets and their history:
+``docs/cloth.md``.
 
-**Thread energy (D-C10, this library's; ``thread_energy``).** The default ``"capped"`` divides
-each tangent sample's f_s by max(1, rho), rho its *exit albedo* (:mod:`.energy`: the
-fraction of the light the sample intercepts that it sends out of the patch, in the exit measure of
-Eq. 5.20, from one-dimensional tables in theta_i per family): no sample sends out more than it
-intercepts. rho is exact for a flat sample lit in its normal-tangent plane and an upper estimate
-for tilted ones. Where every sample has rho <= 1 the model is the thesis' (bit-identical); the
-presets' hand-fitted threads exceed it at large thread inclinations, so some presets change at
-the thesis' measurement geometry: largest change of f over random w_o, thesis -> capped, at
-0 / 30 / 45 / 60 / 75 deg incidence: silk_shot 0 / 2 / 15 / 33 / 52 %, linen_plain 0 / 0 / 0 /
-11 / 31 %, silk_crepe_de_chine <= 0.1 % up to 45 deg, 0.9 % at 60; the satins < 0.1 % up to
-60 deg; velvet < 1e-4 of its maximum. ``thread_energy="thesis"`` reproduces the thesis' figures. Measured
-maxima of the albedo over R, G, B and light azimuths 0/45/90 deg (T = 16, 64 x 128 quadrature),
-thesis -> capped:
-
-| weaves                                     | <= 80 deg     | 85 deg        | 89 deg        | 89.5 deg      |
-|--------------------------------------------|---------------|---------------|---------------|---------------|
-| presets (with the patch gate)              | 0.36 -> 0.36  | 0.63 -> 0.63  | 1.30 -> 0.80  | -             |
-| random weaves (18, the slow test's draw)   | -> 0.96       | -> 1.10       | -> 1.22       | -> 1.24       |
-| 6 bright random (A, k_d >= 0.8, eta <= 3)  | 1.85 -> 0.94  | 2.2 -> 1.00   | 3.6 -> 1.19   | 4.1 -> 1.28   |
-
-(these figures without the normalisation floor below: ``normalization_floor="none"``).
-
-**Normalisation floor (D-C11, this library's; ``normalization_floor``).** The residual above 1
-in the table comes from Eq. 5.20's denominator sum_k P(t_k, w_i, w_r): it depends on w_r, so at
-a grazing exit, where few samples are both lit and visible, those few are renormalised to fill
-the patch and the samples' weights shift towards the ones whose lobes point at w_r (with
-``reweighting=False`` the same weaves stay <= 0.97). No bound of the form "each sample sends
-out at most what it intercepts" survives weights that depend on w_r. The floor raises the
-denominator to at least s F, F = sum_k a_k P(t_k, w_i): since P(t, w_i, w_r) <= P(t, w_i), every
-weight is then <= W_t / s, W_t = a_j P(t, w_i) / F, a function of w_i alone (the W_t sum to 1).
-The patch gate's E becomes the larger of its Eq. 5.20 value and s E_W, E_W the intercepted
-light averaged with the W_t. With s = 1 the albedo is
-<= sum_t W_t rho_t max(n.w_i, 0) min(1, N.w_i / E_W) / (N.w_i) <= 1 (each capped sample's
-rho_t <= 1): a bound by construction, as exact as the exit albedo tables. F is the smallest floor for which flat weaves stay ungated. The default
-``"grazing"`` ramps s smoothly (smoothstep in cos theta_i) from 0 at 75 deg incidence to 1 at
-85 deg: below 75 deg the model is the thesis' normalisation, bit for bit (the thesis'
-measurement geometry and the fitting tables lie there). ``"always"`` uses s = 1 at every
-incidence (a bound everywhere, but it removes the renormalisation's grazing-exit brightness:
-changes of up to 100 % at any incidence, velvet most); ``"none"`` is Eq. 5.20. With
-``reweighting=False`` (P = 1) the weights depend on w_i alone and the floor does nothing. Measured (T = 16,
-64 x 128 quadrature, light azimuths 0/45/90 deg, maxima over R, G, B):
-
-* 42 random weaves (three draws of 18, 18 and 6, 3 of them bright): albedo <= 0.93 at every
-  incidence up to 89.5 deg (the largest, 0.93, at 80 deg inside the ramp; <= 0.66 at 85 deg and
-  beyond, where s = 1);
-* presets: unchanged up to 75 deg; largest change of f over random w_o relative to the
-  preset's largest f, at 78 / 80 / 85 / 89 deg: 3-13 % / 9-39 % / 62-76 % / 78-98 %. The floor
-  takes back the renormalised forward glow of grazing light, so the presets' albedo at
-  85-89 deg falls from 0.09-0.80 to 0.04-0.42 (e.g. silk_shot, light along family 1:
-  0.36 / 0.80 -> 0.11 / 0.10 at 85 / 89 deg).
-
-:func:`thesis_form` switches all three of this library's energy decisions off (the thesis' model,
-literally).
-
-Other decisions (spec §6): D-C1 ``theta_d`` and D-C2 ``volume_fresnel`` as in
+Other decisions (spec seed-002 §6): D-C1 ``theta_d`` and D-C2 ``volume_fresnel`` as in
 :mod:`~appearance_jax.bcsdf.thread`; D-C3 gammas in degrees at this boundary; D-C5
 ``masking_width`` = 20 deg; D-C6 ``tangent_sign`` +1 (t = cos a u + sin a N) or -1;
 D-C8 velvet gamma_s 6 deg (:func:`velvet`); D-C9 T = ``n_samples`` = 64 (midpoint samples).
-``normalization="all"`` is Eq. 5.20 (divide by the sum of P over all J T tangents: with P = 1
-each family is weighted a_j / J); ``"per_family"`` divides family j by the sum over C_j only
+``normalization="all"`` is Sadeghi Eq. 5.20 (divide by the sum of P over all J T tangents: with
+P = 1 each family is weighted a_j / J); ``"per_family"`` divides family j by the sum over C_j only
 (a coverage-weighted mean; not in the thesis). ``masking``/``reweighting`` = False set
-M = 1 / P = 1 (Eqs. 5.17 and 5.13).
+M = 1 / P = 1 (Sadeghi Eqs. 5.17 and 5.13).
 
 Family parameters are arrays with the family axis last (bands after it for ``albedo``):
 
@@ -287,7 +221,7 @@ def _patch_gate(in_, weights, wi_z, floor_weights=None, strength=0.0):
 
     M(t, w_i) cos theta_i(t) = max(n(alpha).w_i, 0) is the light a tangent sample intercepts per
     unit area of its own (tilted) element; E = sum_t weights_t max(n(alpha).w_i, 0) is its
-    average over the weave (``weights`` (..., J, T): Eq. 5.20's). A flat patch can intercept no
+    average over the weave (``weights`` (..., J, T): Sadeghi Eq. 5.20's). A flat patch can intercept no
     more than N.w_i per unit area, so where E > N.w_i (tilted tangents facing a grazing light,
     which a real weave shadows) every sample is scaled down by N.w_i / E. For alpha = 0,
     max(n.w_i, 0) = N.w_i and, with weights summing to <= 1, the gate is 1: only tilted
@@ -487,7 +421,7 @@ def _sample(p: Params, wi: Vec3, u):
 eval = boundary(_eval, Params)
 """BRDF f = R / (N.w_i) in 1/sr, bands last (D-C4; module docstring)."""
 radiance_response = boundary(_radiance_response, Params)
-"""The thesis' radiance response R(w_i, w_r) of Eq. 5.20 (= eval * N.w_i), bands last."""
+"""The thesis' radiance response R(w_i, w_r) of Sadeghi Eq. 5.20 (= eval * N.w_i), bands last."""
 pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 
@@ -509,8 +443,8 @@ def from_weave(curves, coverage, *, eta=1.46, albedo=0.3, k_d=0.3, gamma_s=12.0,
 
 def thesis_form(p: Params) -> Params:
     """``p`` with this library's three energy decisions switched off: the thread cosine of
-    Eq. 5.6 (``incident_cosine="thread"``), the thesis' thread BCSDF (``thread_energy="thesis"``)
-    and Eq. 5.20's denominator (``normalization_floor="none"``). The result is Sadeghi's model
+    Sadeghi Eq. 5.6 (``incident_cosine="thread"``), the thesis' thread BCSDF (``thread_energy="thesis"``)
+    and Sadeghi Eq. 5.20's denominator (``normalization_floor="none"``). The result is Sadeghi's model
     literally, whose albedo exceeds 1 near grazing incidence (module docstring)."""
     return p.replace(incident_cosine="thread", thread_energy="thesis", normalization_floor="none")
 

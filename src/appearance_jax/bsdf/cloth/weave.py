@@ -1,5 +1,5 @@
-"""Weaves for the cloth model: tangent curves (App. E), masking/shadowing (Eqs. 5.14-5.16) and
-reweighting (Eqs. 5.18-5.19) of Sadeghi 2011, Ch. 5 (spec seed-002 §1.4.3-1.4.4).
+"""Weaves for the cloth model: tangent curves (App. E), masking/shadowing (Sadeghi Eqs. 5.14-5.16) and
+reweighting (Sadeghi Eqs. 5.18-5.19) of Sadeghi 2011, Ch. 5 (spec seed-002 §1.4.3-1.4.4).
 
 **Tangent curve** (App. E, L2872-2875). One thread family of the smallest repeating patch is
 described by its tangent offset alpha (degrees, the inclination of the thread tangent from the
@@ -19,11 +19,11 @@ n(alpha) = -sin(alpha) u + cos(alpha) N (the local normal tilts with the tangent
 v = N x u. ``sign = -1`` negates alpha (the thesis does not state the sign; symmetric curves
 do not care).
 
-**Masking/shadowing** (Eqs. 5.14-5.16), between threads of the same family only:
+**Masking/shadowing** (Sadeghi Eqs. 5.14-5.16), between threads of the same family only:
 M(t, w) = max(cos phi, 0) with phi the azimuth of w about t from n(alpha), and
 M(t, w_i, w_r) = (1 - u(phi_d)) M_i M_r + u(phi_d) min(M_i, M_r) with u a unit-*height*
 Gaussian of std ``width`` (15-25 deg in Ashikhmin et al. 2000; default 20 deg, D-C5) of
-phi_d = phi_i - phi_r wrapped to [-pi, pi]. **Reweighting** (Eqs. 5.18-5.19): the same blend of
+phi_d = phi_i - phi_r wrapped to [-pi, pi]. **Reweighting** (Sadeghi Eqs. 5.18-5.19): the same blend of
 P(t, w) = max(cos psi, 0), psi = atan2(w.t, w.n) the angle between n and w projected onto the
 (t, n) plane (projected length of the tangent sample). Both are symmetric in (w_i, w_r).
 
