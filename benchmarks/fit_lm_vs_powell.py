@@ -32,9 +32,9 @@ import numpy as np  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
 from appearance_jax import registry  # noqa: E402
-from appearance_jax.fit.grids import in_plane_angles  # noqa: E402
+from appearance_jax.fit.tables.grids import in_plane_angles  # noqa: E402
 from appearance_jax.fit.solve import build_problem, fit  # noqa: E402
-from appearance_jax.fit.table import Table  # noqa: E402
+from appearance_jax.fit.tables.table import Table  # noqa: E402
 
 CASES = {
     "rough_plastic": (dict(alpha=0.15, diffuse_reflectance=(0.5, 0.3, 0.2)),

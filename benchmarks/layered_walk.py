@@ -1,4 +1,4 @@
-"""Monte Carlo throughput of the position-free layered random walk (appearance_jax.mc.layered.walk).
+"""Monte Carlo throughput of the position-free layered random walk (appearance_jax.layered.random_walk.walk).
 
 What is measured: the cosmetics BSDF (:mod:`appearance_jax.bsdf.cosmetics`, the four Table A.1
 presets, azimuth "averaged") evaluated on the in-plane table of the fitting recipe
@@ -141,7 +141,7 @@ def main(argv=None):
     import jax.numpy as jnp
 
     from appearance_jax.bsdf import cosmetics
-    from appearance_jax.fit.table import Table
+    from appearance_jax.fit.tables.table import Table
 
     ti, to = grid()
     table = Table.in_plane(ti, to, np.zeros((ti.size, 3)))

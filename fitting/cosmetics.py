@@ -93,7 +93,7 @@ def synthetic_table(model, truth, *, gen_samples, gen_bounces, noise=NOISE, seed
     """
     import jax
 
-    from appearance_jax.fit.table import Table
+    from appearance_jax.fit.tables.table import Table
 
     ti, to, valid, counts = layout or in_plane_layout()
     t = Table.in_plane(ti, to, np.zeros((ti.size, 3)), source="synthetic cosmetics")
@@ -152,7 +152,7 @@ def run_case(name, *, free=FREE, samples=64, bounces=64, gen_samples=4096, gen_b
     from appearance_jax.core.params import param_specs
     from appearance_jax.fit import fit
     from appearance_jax.fit.solve import build_problem
-    from appearance_jax.fit.transforms import ParamSpace
+    from appearance_jax.fit.solve.transforms import ParamSpace
 
     model = cosmetics.MODEL
     free = tuple(free)

@@ -4,7 +4,7 @@ Each table is a proxy (a neural fit of a MERL measurement, data/nbrdf/PROVENANCE
 evaluated on the in-plane grid of a gonioreflectometer like that of Padrón 2025 §4.5
 (theta_i in {0, 15, 30, 45, 60, 75} deg, signed theta_o from -85 to 85 deg every 5 deg,
 negative = retro-reflection side) and written in the schema of
-:mod:`appearance_jax.fit.csv_table` as a reflectance factor against a 99 % white standard,
+:mod:`appearance_jax.fit.tables.csv_table` as a reflectance factor against a 99 % white standard,
 R = pi f / 0.99: the quantity the cosmetics measurements of the thesis were recorded in.
 No noise is added; values are the proxy's, to 9 significant digits.
 
@@ -24,7 +24,7 @@ FABRICS = ("red-fabric", "white-fabric", "blue-fabric")
 
 def make(name: str, out_dir: str) -> str:
     from appearance_jax.fit import proxy
-    from appearance_jax.fit.csv_table import write_csv
+    from appearance_jax.fit.tables.csv_table import write_csv
 
     t = proxy.proxy_table(name, "in_plane")
     rf = t.replace(values=t.values * np.pi / 0.99, quantity="reflectance_factor", white_reference=0.99,

@@ -8,7 +8,7 @@ proxy, not to the raw measurement.
 Each proxy is sampled on the same out-of-plane gonioreflectometer grid (theta_i in
 {0, 20, 40, 60, 75} deg, theta_o 0..80 deg every 10, phi_o - phi_i 0..180 deg every 30: 315
 directions x RGB), and each model is fitted to all seven tables at once with
-:func:`appearance_jax.fit.batch.fit_batch` (one batched program per model) in the
+:func:`appearance_jax.fit.solve.batch.fit_batch` (one batched program per model) in the
 cosine-weighted log metric (Löw et al. 2012; the loss the proxies were trained with):
 
 ==========================  ==========================================================  =========
@@ -26,7 +26,7 @@ is its scale specular_reflectance per channel, from 0 to 0.965. (Tried and rejec
 specular_reflectance at 1 for the bright fabrics; eta = 1.5 with k fitted puts a floor of
 0.04 under F0 and pinned k at 0 for the dark ones.)
 
-Errors (on the valid samples, see :func:`appearance_jax.fit.residuals.error_metrics`):
+Errors (on the valid samples, see :func:`appearance_jax.fit.solve.residuals.error_metrics`):
 ``cos_log_rmse`` = RMS of log(1 + f_fit cos th_i) - log(1 + f_proxy cos th_i), and
 ``log_rmse`` = RMS of ln(f_fit + 1e-3) - ln(f_proxy + 1e-3).
 
@@ -61,7 +61,7 @@ def fit_fabrics(fabrics, models, metric="cos_log", progress=print):
     jax.config.update("jax_enable_x64", True)
     from appearance_jax import registry
     from appearance_jax.fit import proxy
-    from appearance_jax.fit.batch import fit_batch
+    from appearance_jax.fit.solve.batch import fit_batch
 
     tables = [proxy.proxy_table(name, "gonio") for name in fabrics]
     base = tables[0]

@@ -61,14 +61,14 @@ NOISE = 0.02
 
 
 def in_plane_layout():
-    from appearance_jax.fit.grids import in_plane_angles
+    from appearance_jax.fit.tables.grids import in_plane_angles
 
     return in_plane_angles([0, 15, 30, 45, 60, 75], np.arange(-85, 86, 5))
 
 
 def synthetic_table(model, params, noise=NOISE, seed=0):
     """The model's in-plane RGB BRDF table at ``params`` with multiplicative noise, sigma stated."""
-    from appearance_jax.fit.table import Table
+    from appearance_jax.fit.tables.table import Table
 
     ti, to = in_plane_layout()
     t = Table.in_plane(ti, to, np.zeros((ti.size, 3)), source=f"synthetic {model.name}")
@@ -101,7 +101,7 @@ def run_case(name, n_starts=8, seed=0, out=None, progress=print):
     jax.config.update("jax_enable_x64", True)
     from appearance_jax import registry
     from appearance_jax.fit import fit, write_report
-    from appearance_jax.fit.transforms import ParamSpace
+    from appearance_jax.fit.solve.transforms import ParamSpace
 
     case = CASES[name]
     model = registry.get(case["model"])

@@ -8,8 +8,8 @@ import pytest
 
 from appearance_jax import registry
 from appearance_jax.cli import _parse_fix, main
-from appearance_jax.fit.csv_table import read_csv, write_csv
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.tables.csv_table import read_csv, write_csv
+from appearance_jax.fit.tables.table import Table
 
 RHO = (0.6, 0.4, 0.2)
 
@@ -120,7 +120,7 @@ def test_fit_bad_tables_exit_2(tmp_path, capsys, make, needle):
 
 
 def test_eval_on_table_writes_model_values(tmp_path, capsys):
-    from appearance_jax.fit.grids import gonio_angles
+    from appearance_jax.fit.tables.grids import gonio_angles
 
     ti, pi_, to, po = gonio_angles([0.0, 45.0], [0.0, 30.0, 60.0], [0.0, 90.0])
     R = np.full((ti.size, 3), 0.5)

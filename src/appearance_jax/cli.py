@@ -16,7 +16,7 @@
 
 TABLE is a ``.csv`` file (appearance-jax table v1), a MERL ``.binary`` file (every
 ``--stride``-th bin, default 3) or ``proxy:NAME[:GRID]`` (a Neural-BRDF proxy of a MERL
-material, GRID gonio|in_plane|merl); see :func:`appearance_jax.fit.io.read_table`.
+material, GRID gonio|in_plane|merl); see :func:`appearance_jax.fit.tables.io.read_table`.
 
 Angles are in degrees at this boundary (radians inside the library). In-plane tables use a
 signed theta_o: theta_o = theta_i is the mirror direction, theta_o = -theta_i retro-reflection
@@ -163,14 +163,11 @@ def evaluate_in_plane(model, params, theta_i_deg, theta_o_deg):
     """BSDF values on an in-plane grid; returns (theta_i, theta_o, f[..., bands]) as numpy."""
     import jax.numpy as jnp
 
-    from .core.frame import in_plane_directions
+    from .fit.report.geometry import eval_in_plane
 
     ti, to = np.meshgrid(theta_i_deg, theta_o_deg, indexing="ij")
-    wi, wo = in_plane_directions(jnp.deg2rad(ti.ravel()), jnp.deg2rad(to.ravel()))
-    f = model.eval(params, wi, wo)
-    if isinstance(f, tuple):  # stochastic evaluators: (estimate, standard error)
-        f = f[0]
-    return ti.ravel(), to.ravel(), np.asarray(f)
+    f = eval_in_plane(model, params, jnp.deg2rad(ti.ravel()), jnp.deg2rad(to.ravel()))
+    return ti.ravel(), to.ravel(), f
 
 
 def write_table(path, theta_i, theta_o, f, quantity="BRDF"):
@@ -204,8 +201,10 @@ def plot_in_plane(path, curves, title):
 
 
 def _luminance(f):
+    from .core.spectral import LUMINANCE_WEIGHTS
+
     if f.shape[-1] == 3:
-        return f @ np.array([0.2126, 0.7152, 0.0722])
+        return f @ LUMINANCE_WEIGHTS
     return f.mean(axis=-1)
 
 
@@ -247,16 +246,14 @@ def cmd_eval(args) -> int:
 
 def _eval_on_table(model, params, args) -> int:
     """eval --table: the model at the table's directions, written in the table's quantity."""
-    from .fit.csv_table import write_csv
-    from .fit.io import read_table
-    from .fit.residuals import error_metrics
+    from .core.model import estimate_of
+    from .fit.solve.residuals import error_metrics
+    from .fit.tables.csv_table import write_csv
+    from .fit.tables.io import read_table
 
     table = read_table(args.table, stride=args.stride)
     wi, wo = table.directions()
-    f = model.eval(params, wi, wo)
-    if isinstance(f, tuple):  # stochastic evaluators: (estimate, standard error)
-        f = f[0]
-    f = np.asarray(f, np.float64)
+    f = np.asarray(estimate_of(model.eval(params, wi, wo)), np.float64)
     if f.ndim == 1:
         f = f[:, None]
     if f.shape[1] not in (1, table.n_bands):
@@ -265,7 +262,7 @@ def _eval_on_table(model, params, args) -> int:
                          "give band parameters with one value per table band")
     f = np.broadcast_to(f, table.values.shape)
     # rows at or below the horizon (kept, masked, in MERL-grid tables) have no place in a table file
-    above = (np.cos(table.theta_i) > 1e-12) & (np.cos(table.theta_o) > 1e-12)
+    above = table.above_horizon()
     sub = table.select(above)
     out = sub.with_values(sub.from_brdf(f[above])).replace(source=f"{model.name} at the directions of {table.source}")
     os.makedirs(args.out, exist_ok=True)
@@ -299,9 +296,9 @@ def _fit(args) -> int:
     import shlex
 
     from . import registry
-    from .fit.io import read_table
     from .fit.report import write_report
     from .fit.solve import fit
+    from .fit.tables.io import read_table
 
     say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))  # noqa: E731
     model = registry.get(args.model)
@@ -385,8 +382,8 @@ def main(argv: list[str] | None = None) -> int:
     pe.add_argument("--stride", type=int, default=None, help="MERL bin stride for --table (default 3)")
     pe.add_argument("--out", default="out")
     pe.set_defaults(fn=cmd_eval)
-    from .fit.residuals import METRICS
     from .fit.solve import SOLVERS
+    from .fit.solve.residuals import METRICS
 
     pf = sub.add_parser("fit", help="fit a BSDF to a measured (or proxy) table; write parameters, residuals, figures",
                         description="Fit a BSDF to a table and write params.json, residuals.csv, maps.png, "

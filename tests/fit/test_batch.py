@@ -14,9 +14,9 @@ import numpy as np
 import pytest
 
 from appearance_jax import registry
-from appearance_jax.fit.batch import fit_batch
-from appearance_jax.fit.grids import in_plane_angles
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.solve.batch import fit_batch
+from appearance_jax.fit.tables.grids import in_plane_angles
+from appearance_jax.fit.tables.table import Table
 
 SCRIPT = textwrap.dedent("""
     import json, sys
@@ -24,9 +24,9 @@ SCRIPT = textwrap.dedent("""
     jax.config.update("jax_enable_x64", True)
     import numpy as np
     from appearance_jax import registry
-    from appearance_jax.fit.batch import fit_batch
-    from appearance_jax.fit.grids import in_plane_angles
-    from appearance_jax.fit.table import Table
+    from appearance_jax.fit.solve.batch import fit_batch
+    from appearance_jax.fit.tables.grids import in_plane_angles
+    from appearance_jax.fit.tables.table import Table
 
     m = registry.get("rough_conductor")
     ti, to = in_plane_angles([0, 30, 60], np.arange(-80, 81, 10))

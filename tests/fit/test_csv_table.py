@@ -5,8 +5,8 @@ import re
 import numpy as np
 import pytest
 
-from appearance_jax.fit.csv_table import TableError, read_csv, write_csv
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.tables.csv_table import TableError, read_csv, write_csv
+from appearance_jax.fit.tables.table import Table
 
 HEAD = "# appearance-jax table v1\n# quantity: brdf\n"
 RF = "# quantity: reflectance_factor\n"
@@ -283,7 +283,7 @@ def test_write_rejects_unwritable_tables(tmp_path):
 
 
 def _docstring_examples():
-    import appearance_jax.fit.csv_table as mod
+    import appearance_jax.fit.tables.csv_table as mod
 
     blocks = re.findall(r"::\n\n((?:    .*\n)+)", mod.__doc__)
     return ["".join(ln[4:] + "\n" for ln in b.splitlines()) for b in blocks]

@@ -5,14 +5,14 @@ import importlib.util
 import numpy as np
 import pytest
 
-from appearance_jax.fit import io
-from appearance_jax.fit.csv_table import TableError
-from appearance_jax.fit.grids import MERL_SHAPE
-from appearance_jax.fit.io import DEFAULT_MERL_STRIDE, read_table, write_table
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.tables import io
+from appearance_jax.fit.tables.csv_table import TableError
+from appearance_jax.fit.tables.grids import MERL_SHAPE
+from appearance_jax.fit.tables.io import DEFAULT_MERL_STRIDE, read_table, write_table
+from appearance_jax.fit.tables.table import Table
 
-HAVE_PROXY = importlib.util.find_spec("appearance_jax.fit.proxy") is not None
-needs_proxy = pytest.mark.skipif(not HAVE_PROXY, reason="appearance_jax.fit.proxy (Neural-BRDF proxies) not installed yet")
+HAVE_PROXY = importlib.util.find_spec("appearance_jax.fit.tables.proxy") is not None
+needs_proxy = pytest.mark.skipif(not HAVE_PROXY, reason="appearance_jax.fit.tables.proxy (Neural-BRDF proxies) not installed yet")
 
 
 def _table():
@@ -80,7 +80,7 @@ def test_stride_checks(tmp_path):
 
 
 def test_binary_dispatch_uses_default_stride(tmp_path, monkeypatch):
-    from appearance_jax.fit import merl
+    from appearance_jax.fit.tables import merl
 
     p = tmp_path / "m.binary"
     p.write_bytes(b"")
@@ -93,7 +93,7 @@ def test_binary_dispatch_uses_default_stride(tmp_path, monkeypatch):
 
 
 def test_binary_file_is_read(tmp_path):
-    from appearance_jax.fit.merl import BELOW_HORIZON, write_merl
+    from appearance_jax.fit.tables.merl import BELOW_HORIZON, write_merl
 
     brdf = np.empty(MERL_SHAPE + (3,))
     brdf[:] = (0.3, 0.2, 0.1)

@@ -10,9 +10,9 @@ import re
 import numpy as np
 import pytest
 
-from appearance_jax.fit.csv_table import TableError
-from appearance_jax.fit.grids import MERL_SHAPE, merl_angles
-from appearance_jax.fit.merl import (
+from appearance_jax.fit.tables.csv_table import TableError
+from appearance_jax.fit.tables.grids import MERL_SHAPE, merl_angles
+from appearance_jax.fit.tables.merl import (
     MERL_FILE_BYTES,
     lookup,
     merl_indices,
@@ -287,7 +287,7 @@ def test_lookup_folding_and_clipping(brdf):
 def test_merl_table_to_csv_and_back(tmp_path, brdf):
     """A MERL table written in the CSV schema: valid rows only (below-horizon directions have no
     place in it) and theta_d > 0 (at theta_d = 0 every phi_d bin is the same direction pair)."""
-    from appearance_jax.fit.csv_table import read_csv, write_csv
+    from appearance_jax.fit.tables.csv_table import read_csv, write_csv
 
     t = merl_table(brdf, stride=10)
     td = merl_angles(10)[1].ravel()

@@ -1,4 +1,4 @@
-"""Neural-BRDF proxies (appearance_jax.fit.proxy): data, conventions, horizon, grids, reciprocity."""
+"""Neural-BRDF proxies (appearance_jax.fit.tables.proxy): data, conventions, horizon, grids, reciprocity."""
 
 import jax
 import jax.numpy as jnp

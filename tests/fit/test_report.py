@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from appearance_jax import registry
-from appearance_jax.fit.report import FIT, entry_status, in_plane_rows, write_report
+from appearance_jax.fit.report import FIT, entry_status, write_report
 from appearance_jax.fit.solve import fit
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.tables.table import Table
 
 TRUE_RHO = np.array([0.6, 0.4, 0.2])
-HAVE_PROXY = importlib.util.find_spec("appearance_jax.fit.proxy") is not None
+HAVE_PROXY = importlib.util.find_spec("appearance_jax.fit.tables.proxy") is not None
 
 
 def _lambert_plus_gloss(ti, to_signed):
@@ -132,7 +132,7 @@ def _refit(result, table, model="lambert"):
 
 
 def _gonio(dphi_deg):
-    from appearance_jax.fit.grids import gonio_angles
+    from appearance_jax.fit.tables.grids import gonio_angles
 
     ti, pi_, to, po = gonio_angles([0.0, 30.0, 60.0], np.arange(0.0, 81.0, 10.0), dphi_deg)
     v = np.tile(TRUE_RHO / np.pi, (ti.size, 1)) * (1 + 0.3 * np.cos(to))[:, None]
@@ -142,7 +142,7 @@ def _gonio(dphi_deg):
 def test_out_of_plane_table_uses_its_in_plane_subset(in_plane_fit, tmp_path):
     t = _gonio([0.0, 90.0, 180.0])
     assert not t.is_in_plane
-    rows = in_plane_rows(t)
+    rows = t.in_plane_rows() & t.above_horizon()
     assert rows.sum() == 3 * 9 * 2 + 3  # dphi 0 and 180, plus theta_o = 0 at dphi 90
     r = fit("lambert", t)
     paths = write_report(r, tmp_path, progress=None)
@@ -156,7 +156,7 @@ def test_out_of_plane_table_uses_its_in_plane_subset(in_plane_fit, tmp_path):
 def test_table_without_in_plane_samples_renders_the_model(in_plane_fit, tmp_path):
     t = _gonio([60.0, 90.0, 120.0])
     t = t.select(t.theta_o > 0.1)  # theta_o = 0 lies in every plane
-    assert t.n_samples > 0 and in_plane_rows(t).sum() == 0
+    assert t.n_samples > 0 and (t.in_plane_rows() & t.above_horizon()).sum() == 0
     paths = write_report(_refit(in_plane_fit, t), tmp_path, progress=None)
     d = json.loads(open(paths["params"]).read())
     assert "rendered densely" in d["figures"]["maps"]
@@ -164,9 +164,9 @@ def test_table_without_in_plane_samples_renders_the_model(in_plane_fit, tmp_path
     assert _png_size(paths["maps"])[0] > 400
 
 
-@pytest.mark.skipif(not HAVE_PROXY, reason="appearance_jax.fit.proxy not installed yet")
+@pytest.mark.skipif(not HAVE_PROXY, reason="appearance_jax.fit.tables.proxy not installed yet")
 def test_merl_grid_in_plane_points_are_scattered(in_plane_fit, tmp_path):
-    from appearance_jax.fit.proxy import proxy_table
+    from appearance_jax.fit.tables.proxy import proxy_table
 
     t = proxy_table("white-fabric", "merl", stride=10)
     paths = write_report(_refit(in_plane_fit, t), tmp_path, progress=None, plots=True)

@@ -16,9 +16,9 @@ import jax.numpy as jnp
 
 from appearance_jax import registry
 from appearance_jax.core.model import Model, boundary
-from appearance_jax.fit.grids import gonio_angles, in_plane_angles
+from appearance_jax.fit.tables.grids import gonio_angles, in_plane_angles
 from appearance_jax.fit.solve import SOLVERS, fit
-from appearance_jax.fit.table import Table
+from appearance_jax.fit.tables.table import Table
 
 
 def gonio_table():
@@ -121,7 +121,7 @@ def test_uncertainties_match_the_spread_over_noise_realisations():
     The sample standard deviation of n = 48 estimates has a relative standard error of
     1/sqrt(2 (n - 1)) = 0.103; the ratio must be 1 within 3.5 of that.
     """
-    from appearance_jax.fit.batch import fit_batch
+    from appearance_jax.fit.solve.batch import fit_batch
 
     model = registry.get("rough_conductor")
     truth = model.Params(alpha=0.2, specular_reflectance=(0.9, 0.8, 0.7))

@@ -9,7 +9,7 @@ import pytest
 
 from appearance_jax import registry
 from appearance_jax.core.params import ParamSpec
-from appearance_jax.fit.transforms import EDGE, ParamSpace, _forward, _inverse
+from appearance_jax.fit.solve.transforms import EDGE, ParamSpace, _forward, _inverse
 
 
 @pytest.mark.parametrize("spec", [ParamSpec(0.001, 2.0), ParamSpec(0.0, math.inf), ParamSpec(-math.inf, 1.0),

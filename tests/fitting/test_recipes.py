@@ -1,4 +1,4 @@
-"""The fitting recipes run end to end on a small subset (the full runs are in fitting/)."""
+"""The fitting recipes (fitting/*.py) run end to end on a small subset (the full runs are in fitting/)."""
 
 import importlib.util
 import os

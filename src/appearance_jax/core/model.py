@@ -54,6 +54,12 @@ def as_bands(v) -> jax.Array:
     return jnp.atleast_1d(jnp.asarray(v))
 
 
+def estimate_of(out):
+    """The value of a model evaluation: ``out`` itself, or the estimate of a stochastic model's
+    ``(estimate, standard_error)`` pair (:attr:`Model.stochastic`)."""
+    return out[0] if isinstance(out, tuple) else out
+
+
 @dataclass(frozen=True)
 class Model:
     """Registry record of a model. ``eval``/``sample``/``pdf`` are the validated public functions."""

@@ -27,8 +27,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .solve import SOLVERS, FitResult, build_problem, covariance, entry_arrays, finish, flags, solve_z
-from .table import Table
+from ..tables.table import Table
+from .problem import build_problem, entry_arrays
+from .result import FitResult, covariance, finish, flags
+from .solvers import SOLVERS, solve_z
 
 
 @dataclass

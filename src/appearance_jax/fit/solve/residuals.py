@@ -28,6 +28,11 @@ import numpy as np
 
 METRICS = ("l2", "cos_log", "relative")
 
+# 1/sr: the BRDF floor of the relative metric, (f_model - f_data) / (|f_data| + FLOOR), and of the
+# log errors, ln(f + FLOOR): it keeps black samples finite. One value for the fit, its error
+# summaries and the report's residuals and log-ratio maps.
+FLOOR = 1e-3
+
 
 def check_metric(metric: str) -> str:
     if metric not in METRICS:
@@ -35,7 +40,7 @@ def check_metric(metric: str) -> str:
     return metric
 
 
-def residual(f_model, f_data, cos_i, metric: str, *, floor=1e-3):
+def residual(f_model, f_data, cos_i, metric: str, *, floor=FLOOR):
     """Unweighted residual of ``metric``; ``cos_i`` broadcasts against the bands axis ((N, 1))."""
     if metric == "l2":
         return f_model - f_data
@@ -47,7 +52,7 @@ def residual(f_model, f_data, cos_i, metric: str, *, floor=1e-3):
     raise ValueError(f"metric = {metric!r}: must be one of {', '.join(METRICS)}")
 
 
-def residual_scale(f_data, sigma, cos_i, metric: str, *, floor=1e-3):
+def residual_scale(f_data, sigma, cos_i, metric: str, *, floor=FLOOR):
     """sigma of the residual (first-order propagation of the data's sigma through the metric)."""
     if metric == "l2":
         return sigma
@@ -56,12 +61,12 @@ def residual_scale(f_data, sigma, cos_i, metric: str, *, floor=1e-3):
     return sigma / (jnp.abs(f_data) + floor)
 
 
-def error_metrics(f_model, f_data, mask, cos_i, *, eps: float = 1e-3) -> dict:
+def error_metrics(f_model, f_data, mask, cos_i, *, eps: float = FLOOR) -> dict:
     """Summary errors over the valid entries (numpy floats), for reports and recipe tables.
 
     - ``rmse``: sqrt(mean (f_model - f_data)^2) [1/sr];
     - ``cos_log_rmse``: sqrt(mean r_cos_log^2), the cosine-weighted log error (Löw et al. 2012);
-    - ``log_rmse``: sqrt(mean (ln(f_model + eps) - ln(f_data + eps))^2), eps = 1e-3 1/sr
+    - ``log_rmse``: sqrt(mean (ln(f_model + eps) - ln(f_data + eps))^2), eps = FLOOR = 1e-3 1/sr
       (the log-RMSE of BRDF-fitting papers; eps keeps black samples finite);
     - ``rel_rmse``: sqrt(mean ((f_model - f_data) / (|f_data| + eps))^2).
     """

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.params import ParamSpec, param_specs, validate
+from ...core.params import ParamSpec, param_specs, validate
 
 EDGE = 1e-3  # start values are kept this fraction of the range away from a finite bound
 

@@ -1,6 +1,6 @@
 """CSV tables of gonioreflectometer measurements: the ``appearance-jax table v1`` schema.
 
-:func:`read_csv` turns a file in this schema into a :class:`~appearance_jax.fit.table.Table`,
+:func:`read_csv` turns a file in this schema into a :class:`~appearance_jax.fit.tables.table.Table`,
 :func:`write_csv` writes one back. Every malformed file raises :class:`TableError` with a
 message ``{path}:{line}: {problem}`` (line = 1-based physical line of the file, as an editor
 shows it), so the offending cell can be found directly.

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .table import HORIZON_COS
+
 MERL_SHAPE = (90, 90, 180)  # (theta_h, theta_d, phi_d) bins
 
 
@@ -37,7 +39,7 @@ def half_diff_to_angles(theta_h, theta_d, phi_d):
     """
     import jax
 
-    from ..core.frame import from_half_diff, spherical_angles
+    from ...core.frame import from_half_diff, spherical_angles
 
     # float64 on the CPU whatever the global setting: these are file coordinates, not kernels
     with jax.enable_x64(True), jax.default_device(jax.devices("cpu")[0]):
@@ -46,7 +48,7 @@ def half_diff_to_angles(theta_h, theta_d, phi_d):
                                 np.asarray(phi_d, np.float64))
         ti, pi_ = (np.asarray(a, np.float64) for a in spherical_angles(wi))
         to, po = (np.asarray(a, np.float64) for a in spherical_angles(wo))
-        above = (np.asarray(wi.z) > 1e-12) & (np.asarray(wo.z) > 1e-12)
+        above = (np.asarray(wi.z) > HORIZON_COS) & (np.asarray(wo.z) > HORIZON_COS)
     return ti, np.mod(pi_, 2 * np.pi), to, np.mod(po, 2 * np.pi), above
 
 

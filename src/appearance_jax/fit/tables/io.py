@@ -8,14 +8,14 @@
 Accepted forms of ``spec`` (:data:`FORMS`):
 
 ==============================  ===============================================================
-``PATH.csv``                    :func:`~appearance_jax.fit.csv_table.read_csv`
-``PATH.binary``                 :func:`~appearance_jax.fit.merl.read_merl_table` with ``stride``
+``PATH.csv``                    :func:`~appearance_jax.fit.tables.csv_table.read_csv`
+``PATH.binary``                 :func:`~appearance_jax.fit.tables.merl.read_merl_table` with ``stride``
                                 (default :data:`DEFAULT_MERL_STRIDE` = 3: 30 x 30 x 60 nodes,
                                 54 000 directions of which about half above the horizon; the
                                 full resolution, stride 1, has 1.46 million directions and
                                 makes a fit slow and memory-hungry for no gain with the
                                 smooth analytic models fitted here)
-``proxy:NAME[:GRID]``           :func:`~appearance_jax.fit.proxy.proxy_table` of a MERL
+``proxy:NAME[:GRID]``           :func:`~appearance_jax.fit.tables.proxy.proxy_table` of a MERL
                                 Neural-BRDF **proxy** (not a measurement); GRID one of
                                 ``gonio`` (default), ``in_plane``, ``merl``; ``stride`` applies
                                 to the ``merl`` grid only (default 5 there)
@@ -23,7 +23,7 @@ Accepted forms of ``spec`` (:data:`FORMS`):
 
 File extensions are matched case-insensitively. Errors: an unknown form is a ``ValueError``
 listing these forms; a missing file a ``FileNotFoundError`` naming the path; a malformed file
-a :class:`~appearance_jax.fit.csv_table.TableError` (a ``ValueError``) from its reader; an
+a :class:`~appearance_jax.fit.tables.csv_table.TableError` (a ``ValueError``) from its reader; an
 unknown proxy name a ``ValueError`` with close matches.
 """
 
@@ -55,7 +55,7 @@ def _check_file(p: str) -> None:
 
 
 def read_table(spec, *, stride: int | None = None) -> Table:
-    """A :class:`~appearance_jax.fit.table.Table` from ``spec`` (see the module docstring).
+    """A :class:`~appearance_jax.fit.tables.table.Table` from ``spec`` (see the module docstring).
 
     Args:
         spec: a path (str or path-like) ending ``.csv`` or ``.binary``, or ``proxy:NAME[:GRID]``.
@@ -110,5 +110,5 @@ def _read_proxy(text: str, stride: int | None) -> Table:
 
 
 def write_table(table: Table, path, in_plane: bool | None = None) -> None:
-    """Write ``table`` as an appearance-jax table v1 CSV (:func:`~appearance_jax.fit.csv_table.write_csv`)."""
+    """Write ``table`` as an appearance-jax table v1 CSV (:func:`~appearance_jax.fit.tables.csv_table.write_csv`)."""
     write_csv(table, path, in_plane=in_plane)

@@ -8,7 +8,7 @@ File layout (all little-endian):
 
 A stored value times the channel scale (1/1500, 1.15/1500, 1.66/1500) for (R, G, B) is the
 BRDF in 1/sr. **Negative** stored values mark samples that were not measured; they become
-NaN here and masked samples in a :class:`~appearance_jax.fit.table.Table`, never zeros.
+NaN here and masked samples in a :class:`~appearance_jax.fit.tables.table.Table`, never zeros.
 
 Bins (Rusinkiewicz half/difference angles, phi_h = 0 by isotropy):
 
@@ -18,9 +18,9 @@ Bins (Rusinkiewicz half/difference angles, phi_h = 0 by isotropy):
   the same sample (reciprocity), so phi_d is folded modulo pi.
 
 :func:`lookup` applies these rules; :func:`merl_table` samples the nodes of
-:func:`~appearance_jax.fit.grids.merl_angles` (the lower edge of each bin).
+:func:`~appearance_jax.fit.tables.grids.merl_angles` (the lower edge of each bin).
 
-Errors are :class:`~appearance_jax.fit.csv_table.TableError` with the message
+Errors are :class:`~appearance_jax.fit.tables.csv_table.TableError` with the message
 ``{path}: {problem}`` (a binary file has no line numbers, so there is no ``:line``).
 """
 
@@ -122,8 +122,8 @@ def merl_table(brdf, stride: int = 1, source: str = "<memory>") -> Table:
     """A :class:`Table` (quantity ``brdf``, bands R, G, B) of a MERL BRDF at the grid nodes.
 
     Samples every ``stride``-th bin of each axis at the nodes of
-    :func:`~appearance_jax.fit.grids.merl_angles` (phi_h = 0), converted to
-    (theta_i, phi_i, theta_o, phi_o) by :func:`~appearance_jax.fit.grids.half_diff_to_angles`.
+    :func:`~appearance_jax.fit.tables.grids.merl_angles` (phi_h = 0), converted to
+    (theta_i, phi_i, theta_o, phi_o) by :func:`~appearance_jax.fit.tables.grids.half_diff_to_angles`.
     Every node is a row; nothing is dropped. Masked, with the count of band entries per reason
     in ``Table.masked`` (reasons with a count of 0 are left out):
 
@@ -165,7 +165,7 @@ def merl_indices(theta_h, theta_d, phi_d):
 
     floor of the fractional index, clipped to the table (so theta_h < 0 -> 0, theta >= pi/2 ->
     last bin), with phi_d folded modulo pi; a slack of 1e-6 bin keeps the exact bin edges
-    (the nodes of :func:`~appearance_jax.fit.grids.merl_angles`) in their own bin despite
+    (the nodes of :func:`~appearance_jax.fit.tables.grids.merl_angles`) in their own bin despite
     float rounding. Angles must be finite.
     """
     th = np.asarray(theta_h, dtype=np.float64)

@@ -103,28 +103,27 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.frame import half_vector, spherical_direction, to_half_diff
-from ..core.vec import Vec3
-from ..core.vec import where as vwhere
+from ...core.frame import half_vector, spherical_direction, to_half_diff
+from ...core.vec import Vec3
+from ...core.vec import where as vwhere
 from . import grids
-from .table import Table
+from .table import HORIZON_COS, Table
 
 FABRICS = ("beige-fabric", "black-fabric", "blue-fabric", "dark-specular-fabric",
            "pink-fabric", "red-fabric", "white-fabric")
 
 _FILE = ("nbrdf", "nbrdf_merl.npz")
 _KEYS = ("W1", "b1", "W2", "b2", "W3", "b3")
-# A node counts as below the horizon in a *table* when cos theta <= this: theta = 90 degrees
-# converted from degrees gives cos = 6e-17, which is grazing, not a measurable direction
+# A node counts as below the horizon in a *table* when cos theta <= HORIZON_COS: theta = 90
+# degrees converted from degrees gives cos = 6e-17, which is grazing, not a measurable direction
 # (the same threshold as grids.half_diff_to_angles).
-_HORIZON_COS = 1e-12
 BELOW_HORIZON = "below horizon"
 
 
 @functools.lru_cache(maxsize=1)
 def _archive() -> dict:
     """All arrays of the shipped archive (float32 numpy), read once."""
-    from ..data import path
+    from ...data import path
 
     with path(*_FILE).open("rb") as fh, np.load(fh) as z:
         return {k: np.asarray(z[k]) for k in z.files}
@@ -141,7 +140,7 @@ def _numpy_weights(name: str) -> tuple:
         close = difflib.get_close_matches(str(name), names(), n=5, cutoff=0.5)
         hint = f" Close matches: {', '.join(close)}." if close else ""
         raise KeyError(f"no Neural-BRDF proxy named {name!r}.{hint} "
-                       "List all with appearance_jax.fit.proxy.names().")
+                       "List all with appearance_jax.fit.tables.proxy.names().")
     return tuple(arc[f"merl/{name}/{k}"] for k in _KEYS)
 
 
@@ -257,7 +256,7 @@ def _table(name: str, theta_i, phi_i, theta_o, phi_o, source: str, in_plane_sign
     """Evaluate, mask below-horizon nodes (NaN, reason ``BELOW_HORIZON``) and build the Table."""
     ti, pi_, to, po = (np.asarray(a, np.float64).ravel() for a in np.broadcast_arrays(theta_i, phi_i, theta_o, phi_o))
     values = _evaluate(name, ti, pi_, to, po)
-    above = (np.cos(ti) > _HORIZON_COS) & (np.cos(to) > _HORIZON_COS)
+    above = (np.cos(ti) > HORIZON_COS) & (np.cos(to) > HORIZON_COS)
     mask = np.repeat(above[:, None], 3, axis=1)
     values = np.where(mask, values, np.nan)
     n_below = int((~mask).sum())
@@ -288,7 +287,7 @@ def proxy_table(name: str, grid: str = "gonio", *, stride: int = 5, theta_i_deg=
         grid: where to evaluate:
 
             - ``"merl"``: the MERL half/difference nodes every ``stride`` bins
-              (:func:`~appearance_jax.fit.grids.merl_angles`); nodes with a direction at or below
+              (:func:`~appearance_jax.fit.tables.grids.merl_angles`); nodes with a direction at or below
               the horizon are kept as rows but masked.
             - ``"in_plane"``: theta_i_deg (default 0, 15, ..., 75) x **signed** theta_o_deg
               (default -85 ... 85 step 5; > 0 forward/mirror side, < 0 retro side), built with

@@ -1,7 +1,7 @@
 """A measurement table: directions, values per band, a validity mask and the measured quantity.
 
 :class:`Table` is what every reader returns (CSV gonioreflectometer tables,
-:mod:`~appearance_jax.fit.merl` ``.binary`` files, :mod:`~appearance_jax.fit.proxy` Neural-BRDF
+:mod:`~appearance_jax.fit.tables.merl` ``.binary`` files, :mod:`~appearance_jax.fit.tables.proxy` Neural-BRDF
 proxies) and what the fitters consume. Angles are stored in **radians** (degrees only in files
 and on the command line); values keep the quantity they were measured in and are converted
 to a BRDF in 1/sr explicitly by :meth:`Table.brdf`:
@@ -37,6 +37,8 @@ import numpy as np
 
 QUANTITIES = ("brdf", "cosine_weighted_brdf", "reflectance_factor")
 QUANTITY_UNITS = {"brdf": "1/sr", "cosine_weighted_brdf": "1", "reflectance_factor": "1"}
+HORIZON_COS = 1e-12  # a direction with cos theta <= this lies at or below the horizon
+PLANE_TOL = 1e-6  # rad: phi_o - phi_i within this of 0 or pi (or theta within this of 0) is in the plane
 
 
 @dataclass(frozen=True)
@@ -146,28 +148,51 @@ class Table:
     def spectral(self) -> bool:
         return self.wavelengths is not None
 
+    def _wo_in_plane(self) -> np.ndarray:
+        """(N,) bool: wo in the plane of incidence of wi (phi_o - phi_i = 0 or pi) or on the normal."""
+        dphi = np.mod(self.phi_o - self.phi_i, 2 * np.pi)
+        tol = PLANE_TOL
+        plane = (np.abs(dphi) < tol) | (np.abs(dphi - np.pi) < tol) | (np.abs(dphi - 2 * np.pi) < tol)
+        return plane | (self.theta_o < tol)
+
     @property
     def is_in_plane(self) -> bool:
         """True when every wo lies in the plane of incidence of its wi (|phi_o - phi_i| in {0, pi})."""
-        dphi = np.mod(self.phi_o - self.phi_i, 2 * np.pi)
-        tol = 1e-6
-        plane = (np.abs(dphi) < tol) | (np.abs(dphi - np.pi) < tol) | (np.abs(dphi - 2 * np.pi) < tol)
-        plane |= (self.theta_o < tol) | (self.theta_i < tol)
-        return bool(np.all(plane))
+        return bool(np.all(self._wo_in_plane() | (self.theta_i < PLANE_TOL)))
 
-    def signed_theta_o(self) -> np.ndarray:
-        """Signed theta_o (radians) of an in-plane table: > 0 forward, < 0 retro side."""
-        if not self.is_in_plane:
+    def in_plane_rows(self) -> np.ndarray:
+        """(N,) bool: the directions a signed theta_o addresses.
+
+        Every row of an in-plane table (:attr:`is_in_plane`); in any other table the rows whose
+        wo lies in the plane of incidence (phi_o - phi_i = 0 or pi within ``PLANE_TOL``) or on
+        the normal (theta_o = 0), e.g. the in-plane subset of a gonioreflectometer or MERL grid.
+        """
+        if self.is_in_plane:
+            return np.ones(self.n_samples, bool)
+        return self._wo_in_plane()
+
+    def above_horizon(self) -> np.ndarray:
+        """(N,) bool: both directions above the horizon (cos theta > ``HORIZON_COS``)."""
+        return (np.cos(self.theta_i) > HORIZON_COS) & (np.cos(self.theta_o) > HORIZON_COS)
+
+    def signed_theta_o(self, *, strict: bool = True) -> np.ndarray:
+        """Signed theta_o (radians) of an in-plane table: > 0 forward, < 0 retro side.
+
+        ``strict=False`` accepts any table: the rows out of the plane (not :meth:`in_plane_rows`)
+        are NaN.
+        """
+        if strict and not self.is_in_plane:
             raise ValueError(f"{self.source}: signed theta_o needs an in-plane table (wo in the plane of incidence)")
         # wo at phi_i + pi is on the forward (mirror) side, wo at phi_i on the retro side
-        return np.where(np.cos(self.phi_o - self.phi_i) > 0, -self.theta_o, self.theta_o)
+        signed = np.where(np.cos(self.phi_o - self.phi_i) > 0, -self.theta_o, self.theta_o)
+        return signed if strict else np.where(self.in_plane_rows(), signed, np.nan)
 
     # ------------------------------------------------------------------ geometry / units
     def directions(self, dtype=None):
         """(wi, wo) as :class:`~appearance_jax.core.vec.Vec3` arrays of shape (N,)."""
         import jax.numpy as jnp
 
-        from ..core.frame import spherical_direction
+        from ...core.frame import spherical_direction
 
         dt = dtype or jnp.result_type(float)
         wi = spherical_direction(jnp.asarray(self.theta_i, dt), jnp.asarray(self.phi_i, dt))
@@ -196,6 +221,24 @@ class Table:
         """Same angles and quantity, new values (e.g. a fitted model), all valid where finite."""
         return self.replace(values=values, mask=np.isfinite(values), sigma=sigma, masked={})
 
+    def linear_rgb(self, f, illuminant: str = "D65") -> np.ndarray:
+        """(N, 3) float64 linear sRGB of per-band values ``f`` (N, B) on this table's bands.
+
+        Spectra are converted as reflectance-like spectra under ``illuminant`` (a flat value v
+        maps to (v, v, v)), RGB bands are returned as they are and any other band set as grey
+        (the mean over bands). NaN where a band of the row is NaN (its colour is unknown).
+        """
+        f = np.asarray(f, np.float64)
+        if self.spectral:
+            from ...core.spectral import spectrum_to_linear_srgb
+
+            ok = np.isfinite(f).all(axis=1, keepdims=True)
+            rgb = spectrum_to_linear_srgb(np.where(np.isfinite(f), f, 0.0), self.wavelengths, illuminant)
+            return np.where(ok, np.asarray(rgb, np.float64), np.nan)
+        if f.shape[1] == 3:
+            return f
+        return np.repeat(f.mean(axis=1, keepdims=True), 3, axis=1)
+
     def to_rgb(self, illuminant: str = "D65") -> "Table":
         """A spectral table converted to linear sRGB (reflectance-like spectra under ``illuminant``).
 
@@ -204,11 +247,10 @@ class Table:
         """
         if not self.spectral:
             return self
-        from ..core.spectral import spectrum_to_linear_srgb
+        from ...core.spectral import spectrum_to_linear_srgb
 
         ok = self.mask.all(axis=1)
-        v = np.where(self.mask, self.values, 0.0)
-        rgb = np.asarray(spectrum_to_linear_srgb(v, self.wavelengths, illuminant))
+        rgb = self.linear_rgb(self.values, illuminant)
         sigma = None
         if self.sigma is not None:  # linear map: propagate independent band errors
             eye = np.eye(self.n_bands)
