@@ -9,7 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from appearance_jax import flatland
+from appearance_jax import flatland, testing
 from appearance_jax.bcsdf import marschner as M
 from appearance_jax.bcsdf import sadeghi as S
 from appearance_jax.bcsdf.fiber import bravais_eta
@@ -50,11 +50,8 @@ def test_roots_match_brute_force(p, eta_p):
 
 
 def test_root_gradient_is_implicit_derivative():
-    phi, eta_p = 0.9, 1.6
-    g = jax.grad(lambda e: M.roots(1, phi, e).h[0])(eta_p)
-    eps = 1e-6
-    fd = (M.roots(1, phi, eta_p + eps).h[0] - M.roots(1, phi, eta_p - eps).h[0]) / (2 * eps)
-    assert abs(g - fd) < 1e-6 * max(1.0, abs(fd))
+    # |AD - FD| <= 5e-7 (1 + |FD|) <= 1e-6 max(1, |FD|)
+    testing.assert_gradients(lambda e: M.roots(1, 0.9, e).h[0], 1.6, rtol=5e-7, atol=5e-7, name="roots")
 
 
 def _flatland_bins(eta, sigma_a, theta_i, edges):
@@ -182,12 +179,8 @@ def test_gradients_match_finite_differences():
         pr = M.Params(eta=x[0], sigma_a=x[1], alpha=x[2], beta=x[3], glint_scale=x[4])
         return jnp.sum(M.eval.kernel(pr, wi, wo))
 
-    x0 = jnp.asarray([1.55, 0.3, -0.08, 0.12, 0.7])
-    g = np.asarray(jax.jit(jax.grad(f))(x0))
-    f = jax.jit(f)
-    eps = 1e-6
-    fd = np.array([(f(x0.at[k].add(eps)) - f(x0.at[k].add(-eps))) / (2 * eps) for k in range(5)])
-    np.testing.assert_allclose(g, fd, rtol=1e-5, atol=1e-8)
+    testing.assert_gradients(jax.jit(f), jnp.asarray([1.55, 0.3, -0.08, 0.12, 0.7]), step=1e-6 / 1.55, rtol=1e-5,
+                             atol=1e-8, elementwise=True, name="marschner")
 
 
 def test_degenerate_directions_finite():

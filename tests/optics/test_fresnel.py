@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from appearance_jax import testing
 from appearance_jax.optics.fresnel import (
     critical_angle,
     fresnel_amplitudes_complex,
@@ -181,17 +182,9 @@ def test_gradients_finite_at_grazing_and_tir_boundary():
 
 
 def test_gradient_matches_finite_differences():
-    # d F / d cos and d F / d eta of the dielectric and the conductor away from kinks
-    def fd(f, x, h=1e-6):
-        return float((f(x + h) - f(x - h)) / (2 * h))  # a float: pytest.approx rejects jax arrays
-
-    c, eta, k = 0.37, 1.45, 2.1
-    g = jax.grad(lambda c_: fresnel_dielectric(c_, eta)[0])(c)
-    assert g == pytest.approx(fd(lambda c_: fresnel_dielectric(c_, eta)[0], c), rel=1e-6)
-    g = jax.grad(lambda e_: fresnel_dielectric(c, e_)[0])(eta)
-    assert g == pytest.approx(fd(lambda e_: fresnel_dielectric(c, e_)[0], eta), rel=1e-6)
-    g = jax.grad(lambda k_: fresnel_conductor(c, 0.4, k_))(k)
-    assert g == pytest.approx(fd(lambda k_: fresnel_conductor(c, 0.4, k_), k), rel=1e-6)
+    # d F / d cos and d F / d eta of the dielectric, d F / d (cos, n, k) of the conductor, away from kinks
+    testing.assert_gradients(lambda x: fresnel_dielectric(*x)[0], (0.37, 1.45), rtol=1e-6, name="dielectric")
+    testing.assert_gradients(lambda x: fresnel_conductor(*x), (0.37, 0.4, 2.1), rtol=1e-6, name="conductor")
 
 
 def test_jit_and_vmap():

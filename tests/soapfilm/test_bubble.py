@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from appearance_jax import testing
 from appearance_jax.core import spectral
 from appearance_jax.core.vec import Vec3, cross, dot
 from appearance_jax.soapfilm import bubble as sb
@@ -244,12 +245,10 @@ def test_gradient_wrt_film_thickness_matches_finite_differences():
         field = lambda m: d * (1.0 + 0.3 * m.z)  # noqa: E731
         return sb.shade(view, nrm, _env, field)
 
-    d0 = 430.0
-    g = jax.jacfwd(f)(d0)
-    h = 1e-3
-    fd = (f(d0 + h) - f(d0 - h)) / (2 * h)
-    assert np.all(np.isfinite(g)) and np.max(np.abs(g)) > 1e-5
-    np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-10)
+    # step 1e-3 nm (h = step * |d|)
+    r = testing.assert_gradients(f, 430.0, step=1e-3 / 430.0, rtol=1e-6, atol=1e-10, elementwise=True, mode="fwd",
+                                 name="shade")
+    assert np.max(np.abs(r.ad[0])) > 1e-5
 
 
 # --------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from appearance_jax import testing
 from appearance_jax.core.frame import spherical_direction
 from appearance_jax.core.vec import Vec3
 from appearance_jax.soapfilm import thickness as th
@@ -97,12 +98,9 @@ def test_gradient_in_g_over_M_matches_finite_differences():
     t = jnp.array([0.0, 1.0, 2.5, math.pi])
     for norm in ("printed", "volume"):
         for a in (0.0, 0.8, 30.0):
-            f = lambda a: th.equilibrium_thickness(t, a, norm)  # noqa: E731
-            g = jax.jacfwd(f)(a)
-            h = 1e-6
-            fd = (f(a + h) - f(a - h)) / (2 * h)
-            assert np.all(np.isfinite(g))
-            np.testing.assert_allclose(g, fd, rtol=1e-6, atol=1e-8)
+            testing.assert_gradients(lambda a: th.equilibrium_thickness(t, a, norm), a, step=1e-6 / max(a, 1.0),
+                                     rtol=1e-6, atol=1e-8, elementwise=True, mode="fwd",
+                                     name=f"equilibrium_thickness[{norm}]")
 
 
 def test_equilibrium_field_is_twice_eta0_times_profile():

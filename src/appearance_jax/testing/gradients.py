@@ -1,4 +1,4 @@
-"""Gradients of any scalar function of a parameter pytree vs central finite differences.
+"""Gradients of a function of a parameter pytree vs central finite differences.
 
 Runs in float64 (it refuses to run without ``jax_enable_x64``: float32 finite differences
 cannot resolve a relative error of 1e-5). For each array leaf of ``params`` (``None``
@@ -15,6 +15,14 @@ A leaf passes when ``max |ad - fd| <= atol + rtol * max(|ad|, |fd|)`` over its e
 noise of the difference quotient. Monte Carlo functions must use a fixed key inside
 ``fn`` (common random numbers) so that ``fn`` is a deterministic function of ``params``.
 Keep evaluation points away from parameter bounds by more than ``h``.
+
+``params`` is any pytree: a model's ``Params``, a flat array (its elements are then the
+variables), a tuple or dict of scalars. Options: ``fn`` may return an array (its Jacobian,
+``jax.jacfwd`` or ``jax.jacrev``, is compared output element by output element); ``fields`` checks a subset
+of the leaves (names as in the result's ``leaves``, e.g. ``".alpha"`` or ``"[0]"``, or a
+dataclass field name ``"alpha"``); ``step`` may be a mapping from those names to steps;
+``elementwise=True`` compares every element against its own scale,
+``|ad - fd| <= atol + rtol * max(|ad|, |fd|)``, instead of the leaf's largest derivative.
 """
 
 from __future__ import annotations
@@ -31,21 +39,41 @@ from .results import CheckResult, fmt, is_x64
 
 @dataclass(frozen=True)
 class GradientResult(CheckResult):
-    value: float  # fn(params)
+    value: float  # fn(params) (its sum for an array-valued fn)
     leaves: tuple  # leaf names (key paths)
-    ad: tuple  # per leaf: AD derivatives (per element or along the probe directions)
+    ad: tuple  # per leaf: AD derivatives (per element or along the probe directions) [, output shape]
     fd: tuple  # per leaf: finite differences of the same
     rel_error: tuple  # per leaf: max |ad - fd| / max(|ad|, |fd|)
     rtol: float
     atol: float
 
 
-def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None, step: float = 1e-5,
-                    max_elements: int = 16, n_directions: int = 4, key=0, name: str = "fn") -> GradientResult:
-    """Compare ``jax.grad(fn)(params)`` with central finite differences, leaf by leaf.
+def _leaf_name_matches(path: str, names) -> bool:
+    return path in names or path.lstrip(".") in names
 
-    ``fn(params) -> scalar``. See the module docstring for the step and tolerances.
+
+def _option(value, path: str, default):
+    """A per-leaf option: a number, or a mapping name -> number (``default`` for others)."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if _leaf_name_matches(path, (k,)):
+                return v
+        return default
+    return value
+
+
+def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None, step=1e-5,
+                    max_elements: int = 16, n_directions: int = 4, key=0, name: str = "fn", fields=None,
+                    elementwise: bool = False, mode: str = "auto") -> GradientResult:
+    """Compare the AD derivatives of ``fn(params)`` with central finite differences, leaf by leaf.
+
+    ``fn(params) -> scalar or array``. See the module docstring for the step, the
+    tolerances and the options (``fields``, per-leaf ``step``, ``elementwise``). ``mode``: how
+    an array-valued ``fn`` is differentiated, ``"fwd"`` (``jax.jacfwd``), ``"rev"``
+    (``jax.jacrev``) or ``"auto"`` (forward when ``params`` has fewer elements than the output).
     """
+    if mode not in ("auto", "fwd", "rev"):
+        raise ValueError(f"check_gradients: mode = {mode!r}: 'auto', 'fwd' or 'rev'")
     if not is_x64():
         raise RuntimeError("check_gradients needs float64: call jax.config.update('jax_enable_x64', True) first")
     leaves_p, treedef = jax.tree_util.tree_flatten_with_path(params)
@@ -53,50 +81,70 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
     leaves = [jnp.asarray(v, jnp.float64) if jnp.issubdtype(jnp.asarray(v).dtype, jnp.floating) else jnp.asarray(v)
               for _, v in leaves_p]
     params64 = jax.tree_util.tree_unflatten(treedef, leaves)
-    f0 = float(fn(params64))
-    grads = jax.tree_util.tree_leaves(jax.grad(fn)(params64))
+    out0 = np.asarray(fn(params64))
+    scalar = out0.ndim == 0
+    if scalar:
+        grads = jax.tree_util.tree_leaves(jax.grad(fn)(params64))
+    else:
+        fwd = mode == "fwd" or (mode == "auto" and sum(np.size(x) for x in leaves) < out0.size)
+        grads = jax.tree_util.tree_leaves((jax.jacfwd if fwd else jax.jacrev)(fn)(params64))
     eps = float(np.finfo(np.float64).eps)
     keys = jax.random.split(as_key(key), max(len(leaves), 1))
     names, ads, fds, rels, problems = [], [], [], [], []
     atol_used = []
+    if fields is not None:
+        fields = (fields,) if isinstance(fields, str) else tuple(fields)
+        unknown = [f for f in fields if not any(_leaf_name_matches(p, (f,)) for p in paths)]
+        if unknown:
+            raise ValueError(f"check_gradients: fields {unknown} are not leaves of params ({paths})")
     for i, (path, x, gx) in enumerate(zip(paths, leaves, grads)):
         if not jnp.issubdtype(x.dtype, jnp.floating):
             continue
+        if fields is not None and not _leaf_name_matches(path, fields):
+            continue
         x = np.asarray(x)
-        gx = np.asarray(gx)
-        h = step * max(float(np.max(np.abs(x))) if x.size else 1.0, 1.0)
+        gx = np.asarray(gx)  # out.shape + x.shape
+        h = _option(step, path, 1e-5) * max(float(np.max(np.abs(x))) if x.size else 1.0, 1.0)
         if x.size <= max_elements:
             dirs = np.eye(x.size).reshape((x.size,) + x.shape)
         else:
             d = np.asarray(jax.random.normal(keys[i], (n_directions, x.size), jnp.float64))
             dirs = (d / np.linalg.norm(d, axis=1, keepdims=True)).reshape((n_directions,) + x.shape)
-        ad = np.array([float(np.sum(gx * e)) for e in dirs])
-        fd = np.empty(len(dirs))
+        ad = np.array([np.tensordot(gx, e, axes=x.ndim) for e in dirs])  # (directions,) + out.shape
+        fd = np.empty_like(ad)
         for j, e in enumerate(dirs):  # a few elements per leaf, each two function calls
 
             def at(sign):
                 new = list(leaves)
                 new[i] = jnp.asarray(x + sign * h * e)
-                return float(fn(jax.tree_util.tree_unflatten(treedef, new)))
+                return np.asarray(fn(jax.tree_util.tree_unflatten(treedef, new)), np.float64)
 
             fd[j] = (at(+1.0) - at(-1.0)) / (2.0 * h)
-        a_tol = 100.0 * eps * max(abs(f0), 1e-300) / h if atol is None else atol
+        a_tol = 100.0 * eps * max(float(np.max(np.abs(out0))) if out0.size else 0.0, 1e-300) / h \
+            if atol is None else atol
         atol_used.append(a_tol)
         err = np.abs(ad - fd)
         scale = np.maximum(np.abs(ad), np.abs(fd))
         smax = float(scale.max()) if scale.size else 0.0
-        rel = float(err.max() / smax) if smax > 0 else 0.0
+        if elementwise:
+            rel = float(np.max(np.where(scale > 0, err / np.where(scale > 0, scale, 1.0), 0.0))) if err.size else 0.0
+            excess = err - (a_tol + rtol * scale)
+        else:
+            rel = float(err.max() / smax) if smax > 0 else 0.0
+            excess = err - (a_tol + rtol * smax)
         names.append(path)
-        ads.append(ad)
-        fds.append(fd)
+        ads.append(ad if not scalar else ad.reshape(-1))
+        fds.append(fd if not scalar else fd.reshape(-1))
         rels.append(rel)
         if not (np.all(np.isfinite(ad)) and np.all(np.isfinite(fd))):
             problems.append(f"{path}: non-finite derivative (AD {ad}, FD {fd})")
-        elif err.max(initial=0.0) > a_tol + rtol * smax:
-            j = int(np.argmax(err))
+        elif excess.size and excess.max() > 0:
+            j = np.unravel_index(int(np.argmax(excess)), excess.shape)
             problems.append(f"{path}: AD {fmt(ad[j])} vs FD {fmt(fd[j])} (relative error {rel:.3g} > {rtol:g})")
     passed = not problems
-    msg = (f"{name}: gradient check {'passed' if passed else 'FAILED'} at f = {fmt(f0)} over leaves "
+    f0 = float(out0) if scalar else float(np.sum(out0))
+    msg = (f"{name}: gradient check {'passed' if passed else 'FAILED'} at "
+           f"{'f = ' + fmt(f0) if scalar else 'sum f = ' + fmt(f0)} over leaves "
            + ", ".join(f"{n} (rel. err {r:.2g})" for n, r in zip(names, rels))
            + ("" if passed else ". Problems: " + "; ".join(problems)))
     return GradientResult("gradients", passed, msg, f0, tuple(names), tuple(ads), tuple(fds), tuple(rels), rtol,
