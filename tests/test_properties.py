@@ -260,6 +260,26 @@ def test_every_model_the_library_defines_is_registered():
         assert importlib.import_module(module).MODEL is registered[name]
 
 
+def test_every_params_field_is_typed():
+    """Numeric fields are annotated ``Real`` or ``Bands`` (``| None`` when optional), matching
+    their ``bands`` metadata; static fields carry their own type, never ``object``."""
+    import dataclasses
+    import typing
+
+    from appearance_jax.core.params import Bands, ParamSpec, Real, param_specs
+
+    for name, model in MODELS.items():
+        hints = typing.get_type_hints(model.Params)
+        for fname, spec in param_specs(model.Params).items():
+            t = hints[fname]
+            assert t is not object, f"{name}.Params.{fname} is annotated object"
+            if isinstance(spec, ParamSpec):
+                want = Bands if spec.bands else Real
+                optional = model.Params.__dataclass_fields__[fname].default is None
+                assert t == (want | None if optional else want), f"{name}.Params.{fname}: {t}"
+        assert all(f.name in hints for f in dataclasses.fields(model.Params))
+
+
 def test_every_registered_model_has_a_grid():
     no_grid = sorted(set(MODELS) - set(GRID))
     no_slow = sorted(set(MODELS) - set(SLOW_GRID))
