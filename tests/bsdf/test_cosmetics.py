@@ -1,7 +1,7 @@
 """The cosmetic-foundation BSDF (Ch. 4, Padrón 2025): presets, limits, errors, and the thesis'
 qualitative claims (spec §2.2.7, §3.3) as tests on in-plane maps.
 
-The random walk itself is validated in tests/mc/test_layered_walk.py (single scattering,
+The random walk itself is validated in tests/layered/test_random_walk.py (single scattering,
 H-function, white furnace, reciprocity, gradients); this file checks the model built on it.
 Tolerances on Monte Carlo values are multiples of the estimates' own standard errors.
 """

@@ -1,4 +1,4 @@
-"""The position-free random walk (mc.layered) against references it did not write.
+"""The position-free random walk (layered.random_walk) against references it did not write.
 
 - first-order scattering == the closed-form single scattering of a slab (spec M35);
 - a semi-infinite isotropic medium == Chandrasekhar's H-function numbers of spec M34;
@@ -27,7 +27,7 @@ from appearance_jax.core.frame import in_plane_directions, spherical_direction
 from appearance_jax.core.quadrature import gauss_legendre
 from appearance_jax.core.vec import Vec3
 from appearance_jax.layered import adding_doubling, medium, single_scattering
-from appearance_jax.mc import layered
+from appearance_jax.layered import random_walk as layered
 from appearance_jax.optics.fresnel import fresnel_dielectric
 
 Z = 4.0  # tolerance in combined standard errors

@@ -10,7 +10,7 @@ or, through :func:`eval_stack`, any BSDF of this library and any number of cosme
 (dewy over matte, Padrón Fig. 4.11).
 
 The BSDF has no closed form: :func:`eval` runs the position-free random walk of
-:mod:`appearance_jax.mc.layered` and returns the estimate **and** its standard error. The
+:mod:`appearance_jax.layered.random_walk` and returns the estimate **and** its standard error. The
 same ``key`` gives the same numbers (common random numbers), so a fit's Jacobian is
 consistent; the autodiff derivative is an unbiased estimate of the derivative of f (score
 terms for the discrete choices, spec §6.4).
@@ -30,7 +30,7 @@ terms for the discrete choices, spec §6.4).
 
 Static settings: ``n_samples`` (paths per direction pair, 128 as in the thesis' fits
 [T:774]), ``max_bounces`` (steps of the walk; the thesis used up to 512 [T:774]; the energy
-lost to truncation is reported in tests/mc/test_layered_walk.py), ``azimuth`` ("fixed": the
+lost to truncation is reported in tests/layered/test_random_walk.py), ``azimuth`` ("fixed": the
 sample as given, tilt axis x; "averaged": the sample rotated uniformly about the normal, for
 in-plane measurements of tilted platelets, decision D4).
 
@@ -62,8 +62,8 @@ from ..core.model import Model, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.vec import Vec3
 from ..layered import medium
-from ..mc.layered import Bottom, walk
-from ..mc.layered import albedo as albedo_walk
+from ..layered.random_walk import Bottom, walk
+from ..layered.random_walk import albedo as albedo_walk
 from . import lambert
 
 AZIMUTH_MODES = ("fixed", "averaged")
@@ -130,7 +130,7 @@ def _albedo(p: Params, wi: Vec3, key=None, n_samples: int = 4096):
 
 albedo = boundary(_albedo, Params, static_argnames=("n_samples",))
 albedo.__doc__ = """Directional albedo (diffuse reflectance, 1) of the layer over its base, by counting the
-paths that escape (:func:`appearance_jax.mc.layered.albedo`): ``(albedo, stderr)``, bands last."""
+paths that escape (:func:`appearance_jax.layered.random_walk.albedo`): ``(albedo, stderr)``, bands last."""
 
 
 def eval_stack(layers: Sequence[Params], wi: Vec3, wo: Vec3, key=None, *, base=None):
@@ -155,7 +155,7 @@ def eval_stack(layers: Sequence[Params], wi: Vec3, wo: Vec3, key=None, *, base=N
         if model.sample is None:
             raise ValueError(f"base model {model.name!r} has no sampler; the random walk needs one")
         bottom = Bottom(model, bp)
-    top = layers[0]  # mc.layered.walk is jitted: one compilation per base model and settings
+    top = layers[0]  # layered.random_walk.walk is jitted: one compilation per base model and settings
     return _walk(layers, bottom, wi, wo, key, top.n_samples, top.max_bounces, top.azimuth)
 
 

@@ -34,7 +34,7 @@ The mean of the path sums estimates ``f(wi, wo) mu_o``; :func:`walk` returns ``f
 standard error. Every walk runs ``max_bounces`` steps of a ``lax.scan`` (a step is one
 collision, one bottom bounce or one interface event); ended paths carry zero throughput
 (an alive mask, no Russian roulette: §6.4). Light still in the stack after the last step
-is lost: the truncation bias, measured in tests/mc/test_layered_walk.py.
+is lost: the truncation bias, measured in tests/layered/test_random_walk.py.
 
 Gradients: all discrete choices (collide or cross, particle type, HG lobe, Fresnel
 reflect or transmit) are drawn with stop-gradient probabilities and weighted by
@@ -59,7 +59,7 @@ import jax.numpy as jnp
 
 from ..core.model import with_bands
 from ..core.vec import Vec3, where
-from ..layered import medium as med
+from . import medium as med
 from ..optics.fresnel import fresnel_dielectric
 
 _TINY = 1e-12

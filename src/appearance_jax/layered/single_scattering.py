@@ -11,7 +11,7 @@ For collimated light from wi on a slab of thickness t (in base mean free paths, 
 (integrate the collision density sigma_t(wi)/mu_i exp(-sigma_t(wi) z / mu_i) over depth z
 against the scattering Lambda f and the escape exp(-sigma_t(wo) z / mu_o)). It is
 reciprocal because sigma_s f is (Padrón Eq. 4.8 discussion, [T:710]) and is the first-order term
-of the random walk :func:`appearance_jax.mc.layered.walk` (checked in tests/mc). For pure
+of the random walk :func:`appearance_jax.layered.random_walk.walk` (checked in tests/layered). For pure
 platelets aligned with the normal and t -> infinity it tends to Lambda_p D(wh) / (8 mu_i mu_o).
 """
 
