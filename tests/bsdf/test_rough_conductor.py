@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from appearance_jax import testing
 from appearance_jax.bsdf import rough_conductor as rc
 from appearance_jax.core.frame import spherical_direction
 from appearance_jax.core.quadrature import sphere_rule
@@ -154,15 +155,7 @@ def test_gradient_matches_finite_differences():
         p = rc.Params(alpha=a, alpha_v=0.3, eta=e, k=k, distribution="beckmann")
         return jnp.sum(rc.eval.kernel(p, wi, wo))
 
-    x = (0.25, 1.1, 2.5)
-    g = jax.jit(jax.grad(f, argnums=(0, 1, 2)))(*x)
-    h = 1e-6
-    for i in range(3):
-        xp, xm = list(x), list(x)
-        xp[i] += h
-        xm[i] -= h
-        fd = (f(*xp) - f(*xm)) / (2 * h)
-        assert float(g[i]) == pytest.approx(float(fd), rel=1e-6)
+    testing.assert_gradients(lambda x: f(*x), (0.25, 1.1, 2.5), rtol=1e-6, name="rough_conductor")
 
 
 @pytest.mark.parametrize(

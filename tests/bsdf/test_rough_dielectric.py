@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from appearance_jax import testing
 from appearance_jax.bsdf import rough_dielectric as rd
 from appearance_jax.core.frame import spherical_direction
 from appearance_jax.core.quadrature import sphere_rule
@@ -165,15 +166,7 @@ def test_gradient_matches_finite_differences():
         p = rd.Params(alpha=a, alpha_v=0.3, eta=e)
         return sum(jnp.sum(rd.eval.kernel(p, wi, wo)) for wo in pairs)
 
-    x = (0.25, 1.4)
-    g = jax.jit(jax.grad(f, argnums=(0, 1)))(*x)
-    h = 1e-6
-    for i in range(2):
-        xp, xm = list(x), list(x)
-        xp[i] += h
-        xm[i] -= h
-        fd = (f(*xp) - f(*xm)) / (2 * h)
-        assert float(g[i]) == pytest.approx(float(fd), rel=1e-6)
+    testing.assert_gradients(lambda x: f(*x), (0.25, 1.4), rtol=1e-6, name="rough_dielectric")
 
 
 @pytest.mark.parametrize(

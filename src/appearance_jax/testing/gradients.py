@@ -64,13 +64,15 @@ def _option(value, path: str, default):
 
 def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None, step=1e-5,
                     max_elements: int = 16, n_directions: int = 4, key=0, name: str = "fn", fields=None,
-                    elementwise: bool = False, mode: str = "auto") -> GradientResult:
+                    elementwise: bool = False, mode: str = "auto", grad_fn=None) -> GradientResult:
     """Compare the AD derivatives of ``fn(params)`` with central finite differences, leaf by leaf.
 
     ``fn(params) -> scalar or array``. See the module docstring for the step, the
     tolerances and the options (``fields``, per-leaf ``step``, ``elementwise``). ``mode``: how
     an array-valued ``fn`` is differentiated, ``"fwd"`` (``jax.jacfwd``), ``"rev"``
     (``jax.jacrev``) or ``"auto"`` (forward when ``params`` has fewer elements than the output).
+    ``grad_fn(params)``, if given, supplies the derivatives under test instead (a pytree like
+    ``params``; e.g. from a compiled ``value_and_grad`` that the caller shares between tests).
     """
     if mode not in ("auto", "fwd", "rev"):
         raise ValueError(f"check_gradients: mode = {mode!r}: 'auto', 'fwd' or 'rev'")
@@ -83,7 +85,9 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
     params64 = jax.tree_util.tree_unflatten(treedef, leaves)
     out0 = np.asarray(fn(params64))
     scalar = out0.ndim == 0
-    if scalar:
+    if grad_fn is not None:
+        grads = jax.tree_util.tree_leaves(grad_fn(params64))
+    elif scalar:
         grads = jax.tree_util.tree_leaves(jax.grad(fn)(params64))
     else:
         fwd = mode == "fwd" or (mode == "auto" and sum(np.size(x) for x in leaves) < out0.size)
