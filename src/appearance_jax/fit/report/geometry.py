@@ -54,6 +54,10 @@ class PlanePoints:
 
 
 def plane_points(t: Table, meas_rgb, fit_rgb) -> PlanePoints:
+    """The in-plane directions of ``t`` above the horizon, repeated ones averaged, with their
+    linear-RGB f from ``meas_rgb`` and ``fit_rgb`` (N, 3). ``enough``: at least 10 measured
+    points over 2 theta_i and 3 theta_o values; ``regular``: they fill at least half of their
+    theta_i x theta_o grid (drawn as cells, else as nearest-sample pixels)."""
     rows = t.in_plane_rows() & t.above_horizon()
     ti = np.round(np.rad2deg(t.theta_i[rows]), 6)
     to = np.round(np.rad2deg(t.signed_theta_o(strict=False))[rows], 6)

@@ -54,7 +54,7 @@ Conventions (checked)
     and f(phi_d + pi) would move the proxy away from the published networks and their sanity
     values (white-fabric blue channel 0.0484 instead of 0.049), and folding phi_d into
     [0, pi) would put a discontinuity in the plane of incidence, where in-plane tables lie.
-    ``tests/fit/test_proxy.py`` measures the asymmetry on the gonio grid.
+    ``tests/fit/tables/test_proxy.py`` measures the asymmetry on the gonio grid.
 
 Mirror configuration (theta_h = 0)
     When wo is the mirror image of wi the half vector is the normal, phi_h is undefined and so
