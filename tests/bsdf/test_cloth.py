@@ -465,22 +465,12 @@ def test_gradients_forward_mode_vs_finite_differences():
     names = ("eta", "albedo", "k_d", "gamma_s", "gamma_v", "offsets")
 
     @jax.jit
-    def fn(leaves):
-        q = p.replace(**dict(zip(names, leaves)))
-        return jnp.sum(c * cloth.eval.kernel(q, wi, wo))
+    def fn(fields):
+        return jnp.sum(c * cloth.eval.kernel(p.replace(**fields), wi, wo))
 
-    x0 = tuple(getattr(p, n) for n in names)
     # offsets nudged off the flat plateaus' exact equalities is not needed: the curve is linear in them
-    for k, n in enumerate(names):
-        e = jnp.asarray(np.random.default_rng(k).normal(size=np.shape(x0[k])))
-        tang = tuple(e if i == k else jnp.zeros_like(x) for i, x in enumerate(x0))
-        _, jv = jax.jvp(fn, (x0,), (tang,))
-        h = 1e-6
-        plus = tuple(x + h * e if i == k else x for i, x in enumerate(x0))
-        minus = tuple(x - h * e if i == k else x for i, x in enumerate(x0))
-        fd = (fn(plus) - fn(minus)) / (2 * h)
-        assert abs(float(jv)) > 1e-8, n
-        assert float(jv) == pytest.approx(float(fd), rel=1e-5, abs=1e-9), n
+    r = testing.assert_gradients(fn, {n: getattr(p, n) for n in names}, rtol=1e-5, mode="fwd", name="cloth")
+    assert len(r.leaves) == len(names) and all(np.max(np.abs(ad)) > 1e-8 for ad in r.ad), r.message
 
 
 def test_grazing_is_zero_and_finite():
@@ -532,11 +522,8 @@ def test_cloth_weave_families_are_cloth_with_scaled_curves():
     np.testing.assert_allclose(np.asarray(q.offsets)[0], np.asarray(front.offsets)[0])
     np.testing.assert_allclose(np.asarray(q.lengths)[0], np.asarray(front.lengths)[0])
     p = cloth_weaves.Params(weave="twill", n_rotations=1, n_samples=4)
-    d = jax.jvp(lambda a: cloth_weaves.eval.kernel(p.replace(alpha=a), wi, wo), (20.0,), (1.0,))[1]
-    h = 1e-4
-    fd = (np.asarray(cloth_weaves.eval(p.replace(alpha=20.0 + h), wi, wo))
-          - np.asarray(cloth_weaves.eval(p.replace(alpha=20.0 - h), wi, wo))) / (2 * h)
-    np.testing.assert_allclose(np.asarray(d), fd, rtol=1e-5, atol=1e-9)
+    testing.assert_gradients(jax.jit(lambda a: cloth_weaves.eval.kernel(p.replace(alpha=a), wi, wo)), 20.0,
+                             step=1e-4 / 20.0, rtol=1e-5, atol=1e-9, elementwise=True, mode="fwd", name="cloth_weaves")
     with pytest.raises(ValueError, match="weave"):
         cloth_weaves.Params(weave="jersey")
     with pytest.raises(ValueError, match="alpha"):

@@ -69,8 +69,9 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
 
     ``fn(params) -> scalar or array``. See the module docstring for the step, the
     tolerances and the options (``fields``, per-leaf ``step``, ``elementwise``). ``mode``: how
-    an array-valued ``fn`` is differentiated, ``"fwd"`` (``jax.jacfwd``), ``"rev"``
-    (``jax.jacrev``) or ``"auto"`` (forward when ``params`` has fewer elements than the output).
+    ``fn`` is differentiated, ``"fwd"`` (``jax.jacfwd``), ``"rev"`` (``jax.grad`` /
+    ``jax.jacrev``) or ``"auto"`` (reverse for a scalar ``fn``; for an array, forward when
+    ``params`` has fewer elements than the output).
     ``grad_fn(params)``, if given, supplies the derivatives under test instead (a pytree like
     ``params``; e.g. from a compiled ``value_and_grad`` that the caller shares between tests).
     """
@@ -87,7 +88,7 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
     scalar = out0.ndim == 0
     if grad_fn is not None:
         grads = jax.tree_util.tree_leaves(grad_fn(params64))
-    elif scalar:
+    elif scalar and mode != "fwd":
         grads = jax.tree_util.tree_leaves(jax.grad(fn)(params64))
     else:
         fwd = mode == "fwd" or (mode == "auto" and sum(np.size(x) for x in leaves) < out0.size)
