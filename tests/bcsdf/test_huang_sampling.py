@@ -15,6 +15,7 @@ import pytest
 from appearance_jax import flatland as fl
 from appearance_jax.bcsdf import fiber, huang, huang_sampling
 from appearance_jax.core.frame import fiber_angles, fiber_direction
+from appearance_jax.core.spectral import LUMINANCE_WEIGHTS
 from appearance_jax.core.quadrature import gauss_legendre
 
 DEG = np.pi / 180
@@ -149,7 +150,7 @@ def test_lobe_attenuations_probabilities_and_weights():
     err = np.percentile(np.abs(A - ref[:3]).max(axis=2), 99, axis=1)
     print("99th percentile of |A_p - A_p(smooth)| per lobe:", err)
     assert np.all(err < 1e-3)
-    lum = A @ np.asarray(huang_sampling.LUMINANCE_RGB)
+    lum = A @ np.asarray(LUMINANCE_WEIGHTS)
     np.testing.assert_allclose(P, lum / lum.sum(0), rtol=1e-12)
     # weight of the chosen lobe
     onehot = np.arange(3)[:, None] == np.asarray(lobe)[None]

@@ -87,11 +87,11 @@ from ..core.model import Model, as_bands, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static
 from ..core.rng import uniforms
 from ..core.special import atan2, safe_asin, safe_sqrt
+from ..core.spectral import luminance_or_mean
 from ..core.vec import Vec3
 from . import fiber
 
 P_MAX = 3  # lobes R, TT, TRT + residual
-LUMINANCE_RGB = (0.212671, 0.715160, 0.072169)  # Rec. 709 / sRGB, lobe selection with 3 bands
 _DEFAULT_SIGMA_A = tuple(1.3 * c for c in fiber.EUMELANIN_RGB)
 
 
@@ -201,11 +201,7 @@ def offset_from_normal(wi: Vec3):
 
 def _lobe_probabilities(A):
     """Lobe selection probabilities from A_p (shape (4, ..., bands)) -> (4, ...)."""
-    nb = A.shape[-1]
-    if nb == 3:
-        w = A @ jnp.asarray(LUMINANCE_RGB, dtype=A.dtype)
-    else:
-        w = jnp.mean(A, axis=-1)
+    w = luminance_or_mean(A)
     tot = jnp.sum(w, axis=0)
     return jnp.where(tot > 0, w / jnp.where(tot > 0, tot, 1.0), jnp.where(jnp.arange(4) == 0, 1.0, 0.0)
                      .reshape((4,) + (1,) * (w.ndim - 1)))

@@ -22,10 +22,10 @@ from ..core.frame import fiber_angles, reflect, refract
 from ..core.model import as_bands
 from ..core.quadrature import simpson, simpson_mc
 from ..core.rng import is_prng_key, uniforms
+from ..core.spectral import luminance_or_mean
 from ..core.vec import Vec3
 from ..microfacet import distribution as mf
 from ..optics.fresnel import fresnel_dielectric
-from .chiang import LUMINANCE_RGB
 from .fiber import (arc_element, ellipse_chord, ellipse_normal, ellipse_point, entry_gamma, half_width, meso_frame,
                     meso_normal, minor_axis, visible_gamma_interval)
 
@@ -47,17 +47,9 @@ def _ex(v: Vec3):
 
 
 
-def _luminance(A):
-    """Scalar used for lobe selection: Rec. 709 luminance of 3 bands (Huang's code: the
-    luminance mean of the spectral attenuation), the band mean otherwise."""
-    if A.shape[-1] == 3:
-        return A @ jnp.asarray(LUMINANCE_RGB, dtype=A.dtype)
-    return jnp.mean(A, axis=-1)
-
-
 def _lobe_probabilities(A):
     """P_p = lum(A_p) / sum_q lum(A_q), shape (n_lobes, ...); all zero when every A_p is 0."""
-    lum = _luminance(A)
+    lum = luminance_or_mean(A)  # Huang's code: the luminance of the spectral attenuation
     tot = jnp.sum(lum, axis=0)
     return jnp.where(tot > 0, lum / jnp.where(tot > 0, tot, 1.0), 0.0)
 

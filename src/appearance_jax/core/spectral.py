@@ -249,7 +249,9 @@ def _rgb_to_xyz_matrix(primaries_xy, white_xy) -> np.ndarray:
 
 RGB_TO_XYZ = _rgb_to_xyz_matrix(SRGB_PRIMARIES_XY, SRGB_WHITE_XY)
 XYZ_TO_RGB = np.linalg.inv(RGB_TO_XYZ)
-# Relative luminance of linear sRGB: the Y row (0.2126729, 0.7151522, 0.0721750)
+# Relative luminance of linear sRGB: the Y row of RGB_TO_XYZ from the sRGB primaries and the D65
+# white (0.2126390, 0.7151687, 0.0721923; IEC 61966-2-1 rounds them to 0.2126, 0.7152, 0.0722).
+# The one definition in the library: reports, the CLI and the hair samplers' lobe choice use it.
 LUMINANCE_WEIGHTS = RGB_TO_XYZ[1].copy()
 
 
@@ -266,6 +268,18 @@ def linear_srgb_to_xyz(rgb) -> jnp.ndarray:
 def luminance(rgb) -> jnp.ndarray:
     """Relative luminance Y of linear sRGB values (trailing axis of 3 dropped)."""
     return jnp.asarray(rgb) @ jnp.asarray(LUMINANCE_WEIGHTS, dtype=jnp.result_type(float))
+
+
+def luminance_or_mean(x) -> jnp.ndarray:
+    """A band-valued quantity as one number: the relative luminance when it has 3 bands
+    (linear sRGB), the band mean otherwise (e.g. spectral bands). Trailing axis dropped.
+
+    Used where a sampler chooses among band-valued lobes by their weight (hair).
+    """
+    x = jnp.asarray(x)
+    if x.shape[-1] == 3:
+        return x @ jnp.asarray(LUMINANCE_WEIGHTS, dtype=x.dtype)
+    return jnp.mean(x, axis=-1)
 
 
 def linear_to_srgb(linear) -> jnp.ndarray:
@@ -304,4 +318,5 @@ __all__ = [
     "RGB_TO_XYZ",
     "XYZ_TO_RGB",
     "LUMINANCE_WEIGHTS",
+    "luminance_or_mean",
 ]
