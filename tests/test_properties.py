@@ -93,7 +93,7 @@ GRID: dict[str, list[Case]] = {
     # the cosmetic foundation is a Monte Carlo estimator (Model.stochastic): the deterministic checks
     # below do not apply; its statistical versions (reciprocity within 3 sigma, white furnace, gradients
     # with common random numbers vs finite differences) are in tests/bsdf/test_cosmetics.py and
-    # tests/mc/test_layered_walk.py
+    # tests/layered/test_random_walk.py
     "cosmetics": [Case("dewy1", dict(preset="dewy1"))],
     # Sadeghi's cloth (BRDF form, not reciprocal: cos theta_i(t) / N.w_i; tests/bsdf/test_cloth.py checks
     # f_s, M and P). T = 4 tangent samples keep it cheap (presets: SLOW_GRID); the default energy gate
@@ -233,7 +233,7 @@ def _setup(name, case):
     model = MODELS[name]
     if model.stochastic:
         pytest.skip(f"{name} is a Monte Carlo estimator: its statistical property tests live in "
-                    "tests/bsdf/test_cosmetics.py and tests/mc/test_layered_walk.py")
+                    "tests/bsdf/test_cosmetics.py and tests/layered/test_random_walk.py")
     kw = dict(case.params)
     if "preset" in kw:
         return model, model.presets[kw.pop("preset")]
