@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from appearance_jax import flatland as fl
+from appearance_jax import flatland as fl, testing
 from appearance_jax.core.frame import Frame, fiber_direction
 from appearance_jax.core.vec import Vec3, dot, normalize
 from appearance_jax.microfacet import distribution as mf
@@ -161,13 +161,15 @@ def test_gradients_of_crn_estimates_match_finite_differences():
         e = jnp.zeros(3).at[k].set(h)
         return (lobes(x + e, key) - lobes(x - e, key)) / (2 * h)
 
-    J = jac(x, KEY)
-    for k in (0, 1):                                   # R lobe: roughness, tilt
-        ref = float(fd(KEY, k, 1e-6)[0])
-        assert abs(float(J[0, k]) - ref) < 1e-5 * abs(ref), (k, float(J[0, k]), ref)
-        assert abs(ref) > 1e-3
-    ref = float(fd(KEY, 2, 1e-6)[1])                   # TT: absorption
-    assert abs(float(J[1, 2]) - ref) < 1e-5 * abs(ref) and ref < 0
+    J = np.asarray(jac(x, KEY))
+    names = ("roughness", "tilt", "sigma_a")
+    for lobe, fields in ((0, ("roughness", "tilt")), (1, ("sigma_a",))):  # R: roughness, tilt; TT: absorption
+        r = testing.assert_gradients(lambda d: lobes(jnp.stack([d[n] for n in names]), KEY)[lobe],
+                                     dict(zip(names, np.asarray(x))), fields=fields, step=1e-6, rtol=1e-5, atol=0.0,
+                                     elementwise=True, grad_fn=lambda d: dict(zip(names, J[lobe])),
+                                     name=f"lobe {lobe}")
+        assert all(abs(q[0]) > 1e-3 for q in r.fd), r.message
+    assert r.fd[0][0] < 0  # TT darkens with absorption
     ad, fdq = [], []
     for i in range(8):                                 # TT + TRT: roughness, over keys
         key = jax.random.PRNGKey(100 + i)

@@ -300,6 +300,26 @@ def test_gradients_skip_none_and_static_fields_and_probe_large_leaves():
     assert len(r.ad[1]) == 4  # 18 elements > max_elements: 4 random directions
 
 
+def test_gradients_of_arrays_fields_steps_and_supplied_derivatives():
+    """Array-valued fn (Jacobian, forward and reverse), a subset of fields, per-field steps, the
+    elementwise tolerance, derivatives supplied by grad_fn; unknown names raise."""
+    x = {"a": 0.3, "b": jnp.array([1.0, 2.0, 3.0])}
+    fn = lambda d: jnp.sin(d["a"] * d["b"]) + d["b"] ** 2  # noqa: E731
+    for mode in ("fwd", "rev"):
+        r = testing.assert_gradients(fn, x, mode=mode, elementwise=True, rtol=1e-8)
+        assert r.leaves == ("['a']", "['b']") and r.ad[1].shape == (3, 3)
+    r = testing.assert_gradients(fn, x, fields="b", step={"b": 1e-6}, rtol=1e-8)
+    assert r.leaves == ("['b']",)
+    g = jax.grad(lambda d: jnp.sum(fn(d)))(x)
+    assert testing.check_gradients(lambda d: jnp.sum(fn(d)), x, grad_fn=lambda d: g).passed
+    wrong = {"a": 2.0 * g["a"], "b": g["b"]}
+    r = testing.check_gradients(lambda d: jnp.sum(fn(d)), x, grad_fn=lambda d: wrong)
+    assert not r.passed and "['a']" in r.message and "['b']" not in r.message.split("Problems")[1]
+    for kw in (dict(fields=("c",)), dict(step={"c": 1e-6})):
+        with pytest.raises(ValueError, match="not leaves"):
+            testing.check_gradients(fn, x, **kw)
+
+
 def test_gradients_of_sampled_directions_hg():
     """Sampled HG directions are reparameterised: d wo / d g checked by FD with fixed uniforms."""
     wi = testing.random_directions(9, 64, "sphere")

@@ -20,7 +20,7 @@ Keep evaluation points away from parameter bounds by more than ``h``.
 variables), a tuple or dict of scalars. Options: ``fn`` may return an array (its Jacobian,
 ``jax.jacfwd`` or ``jax.jacrev``, is compared output element by output element); ``fields`` checks a subset
 of the leaves (names as in the result's ``leaves``, e.g. ``".alpha"`` or ``"[0]"``, or a
-dataclass field name ``"alpha"``); ``step`` may be a mapping from those names to steps;
+bare field or dict key ``"alpha"``); ``step`` may be a mapping from those names to steps;
 ``elementwise=True`` compares every element against its own scale,
 ``|ad - fd| <= atol + rtol * max(|ad|, |fd|)``, instead of the leaf's largest derivative.
 """
@@ -49,7 +49,9 @@ class GradientResult(CheckResult):
 
 
 def _leaf_name_matches(path: str, names) -> bool:
-    return path in names or path.lstrip(".") in names
+    """``path`` (a key path: ``".alpha"``, ``"['alpha']"``, ``"[0]"``) is one of ``names``, given as
+    key paths or bare field / dict key names (``"alpha"``)."""
+    return path in names or path.lstrip(".") in names or path.strip("[]'\"") in names
 
 
 def _option(value, path: str, default):
@@ -81,6 +83,12 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
         raise RuntimeError("check_gradients needs float64: call jax.config.update('jax_enable_x64', True) first")
     leaves_p, treedef = jax.tree_util.tree_flatten_with_path(params)
     paths = [jax.tree_util.keystr(p) for p, _ in leaves_p]
+    if fields is not None:
+        fields = (fields,) if isinstance(fields, str) else tuple(fields)
+    for what, names_ in (("fields", fields), ("step", step if isinstance(step, dict) else None)):
+        unknown = [f for f in names_ or () if not any(_leaf_name_matches(p, (f,)) for p in paths)]
+        if unknown:
+            raise ValueError(f"check_gradients: {what} {unknown} are not leaves of params ({paths})")
     leaves = [jnp.asarray(v, jnp.float64) if jnp.issubdtype(jnp.asarray(v).dtype, jnp.floating) else jnp.asarray(v)
               for _, v in leaves_p]
     params64 = jax.tree_util.tree_unflatten(treedef, leaves)
@@ -97,11 +105,6 @@ def check_gradients(fn, params, *, rtol: float = 1e-5, atol: float | None = None
     keys = jax.random.split(as_key(key), max(len(leaves), 1))
     names, ads, fds, rels, problems = [], [], [], [], []
     atol_used = []
-    if fields is not None:
-        fields = (fields,) if isinstance(fields, str) else tuple(fields)
-        unknown = [f for f in fields if not any(_leaf_name_matches(p, (f,)) for p in paths)]
-        if unknown:
-            raise ValueError(f"check_gradients: fields {unknown} are not leaves of params ({paths})")
     for i, (path, x, gx) in enumerate(zip(paths, leaves, grads)):
         if not jnp.issubdtype(x.dtype, jnp.floating):
             continue
