@@ -17,6 +17,8 @@ def test_every_subpackage_is_listed_in_pyproject():
     }
     missing = found - listed
     assert not missing, f"add these subpackages to [tool.setuptools] packages in pyproject.toml: {sorted(missing)}"
+    gone = listed - found - {"appearance_jax.data"}  # data/ is mapped to appearance_jax.data
+    assert not gone, f"listed in pyproject.toml but not in src/: {sorted(gone)}"
 
 
 def test_shipped_data_is_installed_with_provenance():

@@ -109,11 +109,16 @@ def _to_array(v):
     return v
 
 
-def _label(cls) -> str:
-    """"rough_conductor.Params": every model's class is called Params, so name its module too
-    (a model that is a package, ``bsdf/cloth/model.py``, by its package: "cloth.Params")."""
+def owner_name(cls) -> str:
+    """The name of the module that defines a params class, for messages: "rough_conductor"
+    (a model that is a package, ``bsdf/cloth/model.py``, by its package: "cloth")."""
     parts = cls.__module__.split(".")
-    return f"{parts[-2] if parts[-1] == 'model' and len(parts) > 1 else parts[-1]}.{cls.__name__}"
+    return parts[-2] if parts[-1] == "model" and len(parts) > 1 else parts[-1]
+
+
+def _label(cls) -> str:
+    """"rough_conductor.Params": every model's class is called Params, so name its module too."""
+    return f"{owner_name(cls)}.{cls.__name__}"
 
 
 def params_class(cls):

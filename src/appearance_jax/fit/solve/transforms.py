@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ...core.params import ParamSpec, param_specs, validate
+from ...core.params import owner_name, param_specs, ParamSpec, validate
 
 EDGE = 1e-3  # start values are kept this fraction of the range away from a finite bound
 
@@ -108,7 +108,7 @@ class ParamSpace:
             fix = {name: None for name in fix}
         unknown = [k for k in fix if k not in specs]
         if unknown:
-            raise ValueError(f"fix: unknown parameter(s) {', '.join(unknown)} of {cls.__module__.rsplit('.', 1)[-1]}; "
+            raise ValueError(f"fix: unknown parameter(s) {', '.join(unknown)} of {owner_name(cls)}; "
                              f"parameters are {', '.join(specs)}")
         for k in fix:
             if not isinstance(specs[k], ParamSpec):
