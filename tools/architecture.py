@@ -115,19 +115,20 @@ def imports(modules: dict[str, Path]) -> dict[str, set[str]]:
     return graph
 
 
-def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
-    bad = []
+def _cross_layer(graph: dict[str, set[str]]):
+    """(module, dependency, their layers) for every import between two layers (FREE ones left out)."""
     for mod, deps in graph.items():
         a = layer_of(mod)
         if a in FREE:
             continue
         for dep in deps:
             b = layer_of(dep)
-            if b in FREE or b == a:
-                continue
-            if rank_of(b) >= rank_of(a):
-                bad.append((mod, dep))
-    return sorted(bad)
+            if b != a and b not in FREE:
+                yield mod, dep, a, b
+
+
+def upward_imports(graph: dict[str, set[str]]) -> list[tuple[str, str]]:
+    return sorted((mod, dep) for mod, dep, a, b in _cross_layer(graph) if rank_of(b) >= rank_of(a))
 
 
 def circles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -167,14 +168,8 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def layer_edges(graph: dict[str, set[str]]) -> dict[str, set[str]]:
     out: dict[str, set[str]] = {}
-    for mod, deps in graph.items():
-        a = layer_of(mod)
-        if a in FREE:
-            continue
-        for dep in deps:
-            b = layer_of(dep)
-            if b != a and b not in FREE:
-                out.setdefault(a, set()).add(b)
+    for _, _, a, b in _cross_layer(graph):
+        out.setdefault(a, set()).add(b)
     return out
 
 
