@@ -35,11 +35,13 @@ import numpy as np
 
 
 def _fmt_default(v) -> str:
+    """A default for the parameter table: numbers with %g, nested tuples (cloth's per-family
+    curves) recursively, anything else by str."""
     if v is None:
         return "None"
-    if isinstance(v, tuple):
-        return "(" + ", ".join(f"{x:g}" for x in v) + ")"
-    if isinstance(v, (int, float)) and not isinstance(v, bool):
+    if isinstance(v, (tuple, list)):
+        return "(" + ", ".join(_fmt_default(x) for x in v) + ")"
+    if isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_)):
         return f"{v:g}"
     return str(v)
 
