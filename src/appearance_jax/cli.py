@@ -54,7 +54,7 @@ def format_model_table(model) -> str:
     body = [[r["name"] + (" [bands]" if r["bands"] else ""), _fmt_default(r["default"]), r["range"], r["unit"], r["doc"]]
             for r in rows]
     widths = [max(len(h), *(len(b[i]) for b in body)) if body else len(h) for i, h in enumerate(head)]
-    line = lambda cells: "  " + "  ".join(c.ljust(w) for c, w in zip(cells, widths))  # noqa: E731
+    line = lambda cells: ("  " + "  ".join(c.ljust(w) for c, w in zip(cells, widths))).rstrip()  # noqa: E731
     flags = []
     if model.sample is not None:
         flags.append("sample/pdf")
