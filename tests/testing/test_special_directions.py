@@ -21,12 +21,13 @@ CHEAP = {
 
 # models whose eval + gradient take more than ~10 s to compile here: their float32 run is in the
 # slow suite (the default run checks them in float64, the dtype of the other tests)
-HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth_weave", "rough_plastic", "rough_plastic+lambert",
-         "iridescent", "snake"}
+HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth_weave", "rough_plastic", "iridescent", "snake"}
+# sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
+SLOW = {"rough_plastic+lambert"}
 
 MODELS = {m.name: m for m in registry.models()}
 CASES = [pytest.param(name, dtype, id=f"{name}-{dtype}",
-                      marks=[pytest.mark.slow] if dtype == "float32" and name in HEAVY else [])
+                      marks=[pytest.mark.slow] if name in SLOW or (dtype == "float32" and name in HEAVY) else [])
          for name in sorted(MODELS) for dtype in ("float32", "float64")]
 
 
