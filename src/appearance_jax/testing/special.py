@@ -9,8 +9,9 @@ The directions a fuzzer or a measured table hits exactly (the local frame of
   rounding away from the horizon.
 
 :func:`check_special_directions` evaluates the model at every ``(wi, wo)`` pair among
-them (36 pairs, one ``eval`` call) and differentiates the sum of the values with respect
-to every floating-point field of ``params`` (one ``jax.grad`` call). It passes when
+them (36 pairs) and differentiates the sum of the values with respect to every
+floating-point field of ``params`` (one compiled ``jax.value_and_grad`` for all pairs; a
+failing gradient is then traced to its pairs one pair at a time). It passes when
 
 - every value (and, with ``pdf=True``, every ``pdf``) is finite;
 - for reflection-only BSDFs (:func:`.directions.incident_domain` ``== "upper"``) the value
@@ -19,8 +20,9 @@ to every floating-point field of ``params`` (one ``jax.grad`` call). It passes w
 - every gradient is finite. A NaN in one pair's gradient makes a whole fit's gradient
   NaN (a sum of residuals), even where that pair's value is 0; the usual cause is a
   ``sqrt``/``norm``/``atan2``/division evaluated at 0 in a branch that ``jnp.where``
-  masks (the masked branch's NaN cotangent still multiplies 0 -> NaN). Fix it with the
-  double ``where``: make the unsafe operand safe where masked.
+  masks (the masked branch gets a zero cotangent, and 0 times its infinite local
+  derivative is NaN). Fix it with the double ``where``: make the unsafe operand safe
+  where masked, ``jnp.where(ok, x / jnp.where(ok, d, 1.0), 0.0)``.
 
 ``dtype`` picks float32 or float64: the check runs inside ``jax.enable_x64(dtype ==
 float64)`` with the directions and the floating-point fields of ``params`` cast to it.
