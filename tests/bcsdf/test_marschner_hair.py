@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from appearance_jax import flatland, testing
+from appearance_jax.bcsdf import dual_scattering as DS
 from appearance_jax.bcsdf import marschner as M
-from appearance_jax.bcsdf import sadeghi as S
 from appearance_jax.bcsdf.fiber import bravais_eta
 from appearance_jax.core.frame import fiber_direction
 from appearance_jax.core.quadrature import gauss_legendre
@@ -164,10 +164,10 @@ def test_energy_physical_tables():
     """H5: sigma_a = 0, Fresnel on: a_f + a_b <= 1 up to the cos^2 theta_d approximation for
     the halved longitudinal; the literal MJC03 M integrates to ~2 over theta_o."""
     th = jnp.asarray([0.0, 0.6])
-    half = S.tables(M.Params(sigma_a=0.0, longitudinal="half", caustic="none"), S.DualParams(n_quad=48), th)
+    half = DS.tables(M.Params(sigma_a=0.0, longitudinal="half", caustic="none"), DS.DualParams(n_quad=48), th)
     tot = np.asarray(half.a_f + half.a_b)[:, 0]
     assert np.all(tot <= 1.05) and np.all(tot > 0.85), tot
-    lit = S.tables(M.Params(sigma_a=0.0, caustic="none"), S.DualParams(n_quad=48), th)
+    lit = DS.tables(M.Params(sigma_a=0.0, caustic="none"), DS.DualParams(n_quad=48), th)
     np.testing.assert_allclose(np.asarray(lit.a_f + lit.a_b)[:, 0], 2 * tot, rtol=1e-9)
 
 

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from appearance_jax import testing
+from appearance_jax.bcsdf import dual_scattering as DS
 from appearance_jax.bcsdf import marschner as M
 from appearance_jax.bcsdf import sadeghi as S
 from appearance_jax.core.frame import fiber_direction
@@ -20,21 +21,21 @@ _slobes = jax.jit(S.lobes)
 
 
 def test_h1_analytic_global_azimuthal():
-    ng = S.azimuthal_global(S.Params(glint_intensity=0.0))
+    ng = DS.azimuthal_global(S.Params(glint_intensity=0.0))
     np.testing.assert_allclose(float(ng[0]), 0.3729232, atol=1e-7)
     np.testing.assert_allclose(float(ng[2]), 0.3729232, atol=1e-7)  # I_g = 0: TRT = R
     for g, ref in ((5, 0.0696286), (10, 0.1392571), (20, 0.2785124), (30, 0.4166435)):
-        np.testing.assert_allclose(float(S.azimuthal_global(S.Params(gamma_tt=g * DEG))[1]), ref, atol=1e-7)
+        np.testing.assert_allclose(float(DS.azimuthal_global(S.Params(gamma_tt=g * DEG))[1]), ref, atol=1e-7)
     # int_{-pi}^{pi} cos(phi/2) dphi = 4, and N^G (with glints) vs midpoint quadrature of N'
     phi = -np.pi + (np.arange(200000) + 0.5) * (2 * np.pi / 200000)
     n = np.asarray(S.azimuthal(S.Params(), jnp.asarray(phi)))
     np.testing.assert_allclose(n[0].sum() * 2 * np.pi / 200000, 4.0, atol=1e-8)
     front = phi >= np.pi / 2
     num = n[:, front].sum(1) * (2 * np.pi / 200000) * 2 / np.pi
-    np.testing.assert_allclose(np.asarray(S.azimuthal_global(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG))),
+    np.testing.assert_allclose(np.asarray(DS.azimuthal_global(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG))),
                                np.asarray(S.azimuthal(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG),
                                                       jnp.asarray(phi[front]))).mean(1) * 1.0, atol=1e-6)
-    np.testing.assert_allclose(np.asarray(S.azimuthal_global(S.Params())), num, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(DS.azimuthal_global(S.Params())), num, atol=1e-8)
 
 
 def _grid(n=9):
@@ -107,7 +108,7 @@ def _brute_albedo(p, theta_i, n_t=400, n_p=800):
 @pytest.fixture(scope="module")
 def tabs():
     th = jnp.asarray([-0.7, 0.0, 0.4, 1.1])
-    return th, S.tables(S.Params(), S.DualParams(), th)
+    return th, DS.tables(S.Params(), DS.DualParams(), th)
 
 
 def test_h4_normalization_and_tables_vs_brute_force(tabs):
@@ -129,7 +130,7 @@ def test_h4_normalization_and_tables_vs_brute_force(tabs):
     np.testing.assert_allclose((fb + ff).sum(0), 4 * (fb1 + ff1).sum(0), rtol=1e-12)
     assert np.all((fb + ff).sum(0) > 1.0)
     # ... but the normalized f_s'^norm feeding dual scattering neither vanishes nor blows up
-    t4 = S.tables(S.Params(intensity_r=4, intensity_tt=4, intensity_trt=4), S.DualParams(), th[:1])
+    t4 = DS.tables(S.Params(intensity_r=4, intensity_tt=4, intensity_trt=4), DS.DualParams(), th[:1])
     np.testing.assert_allclose(np.asarray(t4.a_f + t4.a_b), 1.0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(t4.a_f), np.asarray(tab.a_f[:1]), atol=1e-12)
 
@@ -140,11 +141,11 @@ def test_backscatter_formulas(tabs):
     A = ab * af ** 2 / (1 - af ** 2) + ab ** 3 * af ** 2 / (1 - af ** 2) ** 3
     np.testing.assert_allclose(np.asarray(tab.A_b), A, rtol=1e-12)
     # H6: a_b -> 0 gives A_b -> 0; finite for a_f <= 0.99 (and clamped beyond)
-    A0, d0, s0 = S.backscatter_terms(jnp.asarray([0.5, 0.99, 1.0]), 0.0, 0.1, 0.1, 0.1, 0.2, 0.7)
+    A0, d0, s0 = DS.backscatter_terms(jnp.asarray([0.5, 0.99, 1.0]), 0.0, 0.1, 0.1, 0.1, 0.2, 0.7)
     np.testing.assert_array_equal(np.asarray(A0), 0.0)
-    for v in S.backscatter_terms(jnp.linspace(0, 1.0, 11), jnp.linspace(1, 0, 11), 0.05, 0.1, 0.1, 0.2, 0.7):
+    for v in DS.backscatter_terms(jnp.linspace(0, 1.0, 11), jnp.linspace(1, 0, 11), 0.05, 0.1, 0.1, 0.2, 0.7):
         assert np.all(np.isfinite(np.asarray(v)))
-    sq = S.backscatter_terms(0.5, 0.5, 0.0, 0.0, 0.1, 0.1, 0.7, "square")[0]
+    sq = DS.backscatter_terms(0.5, 0.5, 0.0, 0.0, 0.1, 0.1, 0.7, "square")[0]
     np.testing.assert_allclose(float(sq), 0.5 * 0.25 / 0.75 + 0.125 * 0.25 / 0.75 ** 2, rtol=1e-12)
 
 
@@ -155,65 +156,65 @@ def _dirs():
 
 
 def test_h3_h6_dual_scattering_limits():
-    p, d = S.Params(), S.DualParams()
+    p, d = S.Params(), DS.DualParams()
     wi, wo = _dirs()
-    t0 = S.dual_scattering_terms(p, d, wi, wo, 0.0, 1.0)
+    t0 = DS.dual_scattering_terms(p, d, wi, wo, 0.0, 1.0)
     np.testing.assert_allclose(np.asarray(t0.T_f), 0.7, rtol=1e-14)
     np.testing.assert_array_equal(np.asarray(t0.sigma_f2), 0.0)
     np.testing.assert_allclose(np.asarray(t0.f_back_scatter), np.asarray(t0.f_back_direct), rtol=1e-14)
     np.testing.assert_array_equal(np.asarray(t0.F_scatter), 0.0)   # clamp: (0.7 - 1) -> 0
     # fully lit, d_b = 0: exactly single scattering
-    F = S.dual_scattering(p, d.replace(d_b=0.0), wi, wo, 0.0, 1.0)
+    F = DS.dual_scattering(p, d.replace(d_b=0.0), wi, wo, 0.0, 1.0)
     np.testing.assert_allclose(np.asarray(F), np.asarray(S.eval(p, wi, wo)), rtol=1e-14)
     # raw option keeps the negative weight
-    traw = S.dual_scattering_terms(p, S.DualParams(clamp="raw"), wi, wo, 0.0, 1.0)
+    traw = DS.dual_scattering_terms(p, DS.DualParams(clamp="raw"), wi, wo, 0.0, 1.0)
     assert np.all(np.asarray(traw.F_scatter) < 0)
     # T_f decreases, sigma_f^2 grows linearly with n
     ns = jnp.asarray([0.0, 1.0, 2.0, 5.0, 10.0])
     Ts, s2 = [], []
     for n in ns:
-        t = S.dual_scattering_terms(p, d, wi, wo, n, 0.3)
+        t = DS.dual_scattering_terms(p, d, wi, wo, n, 0.3)
         Ts.append(np.asarray(t.T_f))
         s2.append(np.asarray(t.sigma_f2))
     Ts, s2 = np.array(Ts), np.array(s2)
     assert np.all(np.diff(Ts, axis=0) < 0)
     np.testing.assert_allclose(s2, np.asarray(ns)[:, None, None] * s2[1][None], rtol=1e-12)
     # H3: adjusters at their defaults reproduce the unadjusted formulas
-    tab = S.tables(p, d, jnp.arcsin(wi.x))
+    tab = DS.tables(p, d, jnp.arcsin(wi.x))
     th_h = 0.5 * (jnp.arcsin(wi.x) + jnp.arcsin(wo.x))
     th_d = 0.5 * (jnp.arcsin(wo.x) - jnp.arcsin(wi.x))
-    t = S.dual_scattering_terms(p, d, wi, wo, 3.0, 0.4)
-    ref = 2 * tab.A_b * S.gaussian(th_h[:, None] - tab.delta_b, tab.sigma_b2) / (np.pi * np.cos(th_d)[:, None] ** 2)
+    t = DS.dual_scattering_terms(p, d, wi, wo, 3.0, 0.4)
+    ref = 2 * tab.A_b * DS.gaussian(th_h[:, None] - tab.delta_b, tab.sigma_b2) / (np.pi * np.cos(th_d)[:, None] ** 2)
     np.testing.assert_allclose(np.asarray(t.f_back_direct), np.asarray(ref), rtol=1e-12)
-    ref_s = 2 * tab.A_b * S.gaussian(th_h[:, None] - tab.delta_b, tab.sigma_b2 + t.sigma_f2) / (
+    ref_s = 2 * tab.A_b * DS.gaussian(th_h[:, None] - tab.delta_b, tab.sigma_b2 + t.sigma_f2) / (
         np.pi * np.cos(th_d)[:, None] ** 2)
     np.testing.assert_allclose(np.asarray(t.f_back_scatter), np.asarray(ref_s), rtol=1e-12)
     # adjusters act only on their own terms
-    t2 = S.dual_scattering_terms(p, d.replace(color_back=(2.0, 1.0, 0.5)), wi, wo, 3.0, 0.4)
+    t2 = DS.dual_scattering_terms(p, d.replace(color_back=(2.0, 1.0, 0.5)), wi, wo, 3.0, 0.4)
     np.testing.assert_allclose(np.asarray(t2.f_back_direct), np.asarray(t.f_back_direct) * [2, 1, 0.5], rtol=1e-12)
     np.testing.assert_array_equal(np.asarray(t2.f_s_scatter), np.asarray(t.f_s_scatter))
-    t3 = S.dual_scattering_terms(p, d.replace(intensity_forward=2.0), wi, wo, 3.0, 0.4)
+    t3 = DS.dual_scattering_terms(p, d.replace(intensity_forward=2.0), wi, wo, 3.0, 0.4)
     np.testing.assert_allclose(np.asarray(t3.f_s_scatter), 2 * np.asarray(t.f_s_scatter), rtol=1e-12)
     np.testing.assert_array_equal(np.asarray(t3.f_back_scatter), np.asarray(t.f_back_scatter))
 
 
 def test_forward_inclinations_and_precomputed_tables():
-    p, d = S.Params(), S.DualParams(n_quad=32)
+    p, d = S.Params(), DS.DualParams(n_quad=32)
     wi, wo = _dirs()
     th_i = jnp.arcsin(wi.x)
     # n hairs with the shading hair's inclination == scalar n (Eqs. 4.23-4.24)
-    T, s2 = S.forward_from_inclinations(p, d, jnp.repeat(th_i[:, None], 4, axis=1))
-    t = S.dual_scattering_terms(p, d, wi, wo, 4.0, 0.2)
+    T, s2 = DS.forward_from_inclinations(p, d, jnp.repeat(th_i[:, None], 4, axis=1))
+    t = DS.dual_scattering_terms(p, d, wi, wo, 4.0, 0.2)
     np.testing.assert_allclose(np.asarray(T), np.asarray(t.T_f), rtol=1e-10)
     np.testing.assert_allclose(np.asarray(s2), np.asarray(t.sigma_f2), rtol=1e-10)
     mask = jnp.asarray([[True, True, False, False]] * 3)
-    T2, _ = S.forward_from_inclinations(p, d, jnp.repeat(th_i[:, None], 4, axis=1), mask)
-    t2 = S.dual_scattering_terms(p, d, wi, wo, 2.0, 0.2)
+    T2, _ = DS.forward_from_inclinations(p, d, jnp.repeat(th_i[:, None], 4, axis=1), mask)
+    t2 = DS.dual_scattering_terms(p, d, wi, wo, 2.0, 0.2)
     np.testing.assert_allclose(np.asarray(T2), np.asarray(t2.T_f), rtol=1e-10)
     # precomputed grid + interpolation close to the direct evaluation
-    grid = S.precompute(p, d, 97)
-    F1 = S.dual_scattering(p, d, wi, wo, 4.0, 0.2, tables=grid)
-    F0 = S.dual_scattering(p, d, wi, wo, 4.0, 0.2)
+    grid = DS.precompute(p, d, 97)
+    F1 = DS.dual_scattering(p, d, wi, wo, 4.0, 0.2, tables=grid)
+    F0 = DS.dual_scattering(p, d, wi, wo, 4.0, 0.2)
     np.testing.assert_allclose(np.asarray(F1), np.asarray(F0), rtol=2e-3)
 
 
@@ -242,11 +243,11 @@ def test_mapping_reproduces_marschner_lobes():
 
 def test_dual_gradients_and_finite():
     wi, wo = _dirs()
-    d = S.DualParams(n_quad=24)
+    d = DS.DualParams(n_quad=24)
 
     def f(x):
         p = S.Params(beta_r=x[0], gamma_tt=x[1], intensity_tt=x[2])
-        return jnp.sum(S._dual_kernel(p, d, wi, wo, 3.0, 0.3))
+        return jnp.sum(DS._dual_kernel(p, d, wi, wo, 3.0, 0.3))
 
     f = jax.jit(f)
     testing.assert_gradients(f, jnp.asarray([0.15, 0.5, 1.2]), rtol=1e-5, atol=1e-9, elementwise=True,
@@ -254,7 +255,7 @@ def test_dual_gradients_and_finite():
     # axis-aligned / grazing directions stay finite
     wa = fiber_direction(jnp.asarray([np.pi / 2, -np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, 0.0]))
     wb = fiber_direction(jnp.asarray([-np.pi / 2, np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, np.pi]))
-    assert np.all(np.isfinite(np.asarray(S.dual_scattering(S.Params(), d, wa, wb, 2.0, 0.5))))
+    assert np.all(np.isfinite(np.asarray(DS.dual_scattering(S.Params(), d, wa, wb, 2.0, 0.5))))
     assert np.all(np.isfinite(np.asarray(S.eval(S.Params(), wa, wb))))
 
 
@@ -263,6 +264,6 @@ def test_bad_parameters_raise():
     with pytest.raises(ValueError, match="gamma_tt"):
         S.eval(S.Params(gamma_tt=0.0), wi, wo)
     with pytest.raises(ValueError, match="d_f"):
-        S.dual_scattering(S.Params(), S.DualParams(d_f=1.5), wi, wo)
+        DS.dual_scattering(S.Params(), DS.DualParams(d_f=1.5), wi, wo)
     with pytest.raises(ValueError, match="a_b_denominator"):
-        S.DualParams(a_b_denominator="cubic")
+        DS.DualParams(a_b_denominator="cubic")
