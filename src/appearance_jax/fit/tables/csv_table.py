@@ -1,9 +1,22 @@
-"""CSV tables of gonioreflectometer measurements: the ``appearance-jax table v1`` schema.
+"""CSV tables of gonioreflectometer measurements: the ``appearance-jax table v1`` schema
+(full schema: docs/tables.md).
 
 :func:`read_csv` turns a file in this schema into a :class:`~appearance_jax.fit.tables.table.Table`,
 :func:`write_csv` writes one back. Every malformed file raises :class:`TableError` with a
 message ``{path}:{line}: {problem}`` (line = 1-based physical line of the file, as an editor
 shows it), so the offending cell can be found directly.
+
+In short: ``#`` header lines (``# appearance-jax table v1``; the required
+``# quantity: brdf | cosine_weighted_brdf | reflectance_factor``, i.e. f in 1/sr,
+f |cos theta_o| or R = pi f / rho_w; ``# white_reference: rho_w``, default 0.99, with
+``reflectance_factor`` only; any other ``#`` line is a comment), then one column line and
+comma-separated rows. Columns, in any order: the angles in **degrees**, ``theta_i, phi_i,
+theta_o, phi_o`` (full geometry) or ``theta_i, theta_o`` with theta_o **signed** (in-plane:
+> 0 forward/mirror side, < 0 retro side, Padrón 2025 Fig. 4.4); the values in the unit of the
+quantity, ``R, G, B`` (linear RGB) or one column per wavelength in nm named by the number;
+optional ``sigma_<band>`` (one standard deviation) for every value column or none. An empty
+value cell or ``nan``/``NA`` is a missing sample: masked, never zero. Duplicate geometries are
+an error. Reading gives angles in radians; an in-plane file becomes :meth:`Table.in_plane`.
 
 Example (a reflectance-factor table measured in the full geometry)::
 
@@ -18,10 +31,7 @@ Example (a reflectance-factor table measured in the full geometry)::
     30,0,60,180,,0.05,0.04,,0.002,0.002
     30,0,45,90,0.15,0.12,0.09,0.003,0.003,0.003
 
-(on the third data row the R sample is missing: it is masked, never read as zero).
-
-The same sample measured in-plane (theta_o signed: -30 is retro-reflection for theta_i = 30,
-+30 the mirror direction), spectral in nm, BRDF in 1/sr, no uncertainties::
+The same sample in-plane (-30 is retro-reflection for theta_i = 30), spectral, BRDF in 1/sr::
 
     # appearance-jax table v1
     # quantity: brdf
@@ -30,64 +40,7 @@ The same sample measured in-plane (theta_o signed: -30 is retro-reflection for t
     30,0,0.032,0.030,0.051
     30,30,0.094,0.088,0.120
 
-Header lines (before the column line)
--------------------------------------
-``# appearance-jax table v1``
-    Identifies the schema. Optional when reading (:func:`write_csv` always writes it);
-    a different version number is an error.
-``# quantity: <q>``
-    **Required.** What the values are, ``q`` one of
-
-    - ``brdf``: the BRDF f in 1/sr;
-    - ``cosine_weighted_brdf``: f |cos theta_o| (dimensionless);
-    - ``reflectance_factor``: R = pi f / rho_w, the sample signal divided by that of a white
-      Lambertian standard of reflectance rho_w under the same geometry (dimensionless).
-``# white_reference: <rho_w>``
-    Optional, reflectance of the white standard, in (0, 1]; default 0.99 (Spectralon).
-    Allowed only with ``quantity: reflectance_factor`` (the only quantity it affects, so a
-    white reference next to another quantity usually means the quantity is wrong).
-Any other line starting with ``#`` is a free comment (instrument, sample, date, ...) and may
-appear anywhere; blank lines are ignored. Keys are matched case-insensitively.
-
-Columns
--------
-The first line that is neither blank nor a comment names the columns, comma separated
-(plain CSV: no quoting, surrounding spaces ignored, columns in any order).
-
-Geometry, angles in **degrees**:
-
-- full geometry: ``theta_i, phi_i, theta_o, phi_o``; theta in [0, 90] from the surface
-  normal, phi in [0, 360] (360 is the same azimuth as 0);
-- in-plane (all directions in the plane of incidence): ``theta_i, theta_o`` only, with
-  theta_i in [0, 90] and theta_o **signed** in [-90, 90]: theta_o > 0 on the forward
-  (mirror) side, theta_o < 0 on the retro-reflection side (Fig. 4.4 of Padrón 2025), so
-  theta_o = theta_i is the mirror direction and theta_o = -theta_i retro-reflection.
-
-Values, in the unit of the quantity, either
-
-- ``R, G, B``: linear RGB (all three), or
-- spectral: one column per wavelength in nm, the name is the number (``450``, ``452.5``),
-  positive and strictly increasing from left to right. RGB and spectral columns cannot be
-  mixed.
-
-Uncertainties (optional): ``sigma_<band>`` (``sigma_R``, ``sigma_450``, ...), one standard
-deviation in the unit of the value, for every value column or for none; finite and >= 0.
-
-Cells
------
-- Numbers in any form Python's ``float`` reads (``30``, ``0.5``, ``1e-3``).
-- A **missing sample**: an empty value cell or ``nan`` / ``NaN`` / ``NA``. The sample is
-  masked (``Table.mask`` False) and counted in ``Table.masked["missing value"]`` (number of
-  band entries); it is never turned into zero. Its sigma cell may then be empty too.
-- Angles must be present on every row and sigma wherever the value is present.
-  ``inf`` is an error in any column.
-- Two rows with the same geometry (compared after rounding to 1e-9 degree and reducing phi
-  modulo 360) are an error: average repeated measurements before writing the table.
-
-Reading produces a :class:`Table` with angles in radians (phi reduced to [0, 2 pi)), the
-values as written, ``bands`` = the value column names and, for spectral tables,
-``wavelengths`` in nm. An in-plane file becomes :meth:`Table.in_plane` (phi_i = 0,
-phi_o = 180 degrees on the forward side, 0 on the retro side).
+(both examples are read by tests/fit/tables/test_csv_table.py.)
 """
 
 from __future__ import annotations
@@ -133,7 +86,7 @@ def _is_wavelength(name: str) -> bool:
 
 # ---------------------------------------------------------------------------- reading
 def read_csv(path) -> Table:
-    """Read a table in the ``appearance-jax table v1`` CSV schema (see the module docstring).
+    """Read a table in the ``appearance-jax table v1`` CSV schema (docs/tables.md).
 
     Args:
         path: file name (str or path-like); it is also the ``source`` of the table and the
@@ -411,7 +364,7 @@ def _geometry_key(row_deg, names):
 
 # ---------------------------------------------------------------------------- writing
 def write_csv(table: Table, path, in_plane: bool | None = None) -> None:
-    """Write ``table`` in the ``appearance-jax table v1`` schema (see the module docstring).
+    """Write ``table`` in the ``appearance-jax table v1`` schema (docs/tables.md).
 
     Values and sigma are written as stored, in the table's own quantity, with ``%.9g``
     (9 significant digits); masked samples as empty cells (with empty sigma). Angles are
