@@ -17,6 +17,7 @@ from appearance_jax.core.params import validate
 from appearance_jax.core.quadrature import gauss_legendre
 from appearance_jax.core.vec import Vec3
 from appearance_jax.microfacet import distribution as md
+from appearance_jax.microfacet import interface_integrals as ii
 from appearance_jax.optics.fresnel import fresnel_dielectric
 
 # two static configurations (each costs a compilation): the defaults, and Mitsuba's choices
@@ -98,7 +99,7 @@ def _scipy_normal_incidence(kind, alpha, eta, mode):
 def test_interface_integrals_normal_incidence_vs_scipy(kind):
     for alpha in (0.05, 0.4, 1.5):
         for mode, eta in (("T", 1.5), ("R", 1 / 1.5), ("R", 1 / 2.4), ("R", 1.5)):
-            fn = rp.interface_transmittance if mode == "T" else rp.interface_reflectance
+            fn = ii.interface_transmittance if mode == "T" else ii.interface_reflectance
             ours = float(fn(kind, alpha, eta, 1.0))
             ref = _scipy_normal_incidence(kind, alpha, eta, mode)
             assert ours == pytest.approx(ref, rel=2e-6, abs=1e-10), (alpha, mode, eta)
@@ -133,9 +134,9 @@ def test_interface_integrals_vs_visible_normal_rule(kind):
     256 nodes) and ~1e-4 for R (its integrand has the TIR kink inside the square)."""
     mu = np.array([0.03, 0.2, 0.55, 0.9])
     for alpha, eta in ((0.1, 1.5), (0.6, 2.0)):
-        T = np.asarray(rp.interface_transmittance(kind, alpha, eta, jnp.asarray(mu)))
+        T = np.asarray(ii.interface_transmittance(kind, alpha, eta, jnp.asarray(mu)))
         np.testing.assert_allclose(T, _vndf_rule(kind, alpha, eta, jnp.asarray(mu), "T", 192), rtol=3e-6)
-        R = np.asarray(rp.interface_reflectance(kind, alpha, 1 / eta, jnp.asarray(mu)))
+        R = np.asarray(ii.interface_reflectance(kind, alpha, 1 / eta, jnp.asarray(mu)))
         np.testing.assert_allclose(R, _vndf_rule(kind, alpha, 1 / eta, jnp.asarray(mu), "R", 192), rtol=1e-3)
 
 
@@ -145,9 +146,9 @@ def test_index_matched_coat_integrals(kind):
     (the quadrature integrates the visible-normal density to 1) and R = 0."""
     mu = jnp.asarray([1e-6, 0.01, 0.1, 0.37, 0.8, 1.0])
     for alpha in (1e-3, 0.05, 0.5, 2.0):
-        T = np.asarray(rp.interface_transmittance(kind, alpha, 1.0, mu))
+        T = np.asarray(ii.interface_transmittance(kind, alpha, 1.0, mu))
         np.testing.assert_allclose(T, _g1(kind, np.asarray(mu), alpha), rtol=2e-6)
-        assert float(jnp.max(jnp.abs(rp.interface_reflectance(kind, alpha, 1.0, mu)))) < 1e-15
+        assert float(jnp.max(jnp.abs(ii.interface_reflectance(kind, alpha, 1.0, mu)))) < 1e-15
 
 
 @pytest.mark.parametrize("kind", ["ggx", pytest.param("beckmann", marks=pytest.mark.slow)])
@@ -158,7 +159,7 @@ def test_smooth_coat_limit(kind):
     mu = 0.15 for GGX, whose heavy tail puts a fraction ~alpha of the facets far from n."""
     eta = 1.5
     mu = np.linspace(0.15, 1.0, 12)
-    T = np.asarray(rp.interface_transmittance(kind, 1e-3, eta, jnp.asarray(mu)))
+    T = np.asarray(ii.interface_transmittance(kind, 1e-3, eta, jnp.asarray(mu)))
     rtol = 2e-4 if kind == "ggx" else 1e-5
     np.testing.assert_allclose(T, 1.0 - np.asarray(fresnel_dielectric(jnp.asarray(mu), eta)[0]), rtol=rtol)
     x, w = gauss_legendre(200, 0.0, 1.0)
@@ -178,22 +179,22 @@ def test_tables_schemes(kind):
         tab = rp.coat_tables(p)
         mu = np.linspace(0.02, 1.0, 96)
         Ti = np.asarray(rp._transmittance_at(p, tab, jnp.asarray(mu)))
-        Td = np.asarray(rp.interface_transmittance(kind, alpha, eta, jnp.asarray(mu)))
+        Td = np.asarray(ii.interface_transmittance(kind, alpha, eta, jnp.asarray(mu)))
         np.testing.assert_allclose(Ti, Td, rtol=2e-6)
         c_c = math.sqrt(1 - 1 / eta**2)
         x1, w1 = gauss_legendre(48, 0.0, c_c)
         x2, w2 = gauss_legendre(48, c_c, 1.0)
         x, w = np.concatenate([x1, x2]), np.concatenate([w1, w2])
-        R = np.asarray(rp.interface_reflectance(kind, alpha, 1 / eta, jnp.asarray(x)))
+        R = np.asarray(ii.interface_reflectance(kind, alpha, 1 / eta, jnp.asarray(x)))
         R_int = 2 * np.sum(w * x * R)
         assert float(tab.internal_reflectance) == pytest.approx(R_int, rel=1e-5)
-        T_avg = 2 * np.sum(w * x * np.asarray(rp.interface_transmittance(kind, alpha, eta, jnp.asarray(x))))
+        T_avg = 2 * np.sum(w * x * np.asarray(ii.interface_transmittance(kind, alpha, eta, jnp.asarray(x))))
         assert T_avg / eta**2 <= 1.0 - R_int
         pm = p.replace(tables="mitsuba")
         tm = rp.coat_tables(pm)
-        nodes = rp.mitsuba_nodes()
+        nodes = ii.mitsuba_nodes()
         np.testing.assert_allclose(np.asarray(tm.transmittance),
-                                   np.asarray(rp.interface_transmittance(kind, alpha, eta, jnp.asarray(nodes))),
+                                   np.asarray(ii.interface_transmittance(kind, alpha, eta, jnp.asarray(nodes))),
                                    rtol=1e-12)
         np.testing.assert_allclose(np.asarray(rp._transmittance_at(pm, tm, jnp.asarray(nodes[1:]))),
                                    np.asarray(tm.transmittance)[1:], rtol=1e-12)
@@ -228,9 +229,9 @@ def test_diffuse_only_closed_form(static):
     p = rp.Params(alpha=0.25, eta=1.7, diffuse_reflectance=rho, specular_reflectance=0.0, **static)
     tab = rp.coat_tables(p)
     if p.tables == "accurate":
-        T = lambda mu: np.asarray(rp.interface_transmittance(p.distribution, 0.25, 1.7, mu))  # noqa: E731
+        T = lambda mu: np.asarray(ii.interface_transmittance(p.distribution, 0.25, 1.7, mu))  # noqa: E731
     else:  # Mitsuba's lerp between its nodes
-        nodes = rp.mitsuba_nodes()
+        nodes = ii.mitsuba_nodes()
         T = lambda mu: np.interp(np.asarray(mu), nodes, np.asarray(tab.transmittance))  # noqa: E731
     r = rho if p.nonlinear else 1.0
     ref = rho / (1 - r * float(tab.internal_reflectance)) * (T(wi.z) * T(wo.z))[:, None] / (math.pi * 1.7**2)

@@ -41,6 +41,7 @@ mi = pytest.importorskip("mitsuba")
 from appearance_jax.bsdf import rough_plastic as rp  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
+from appearance_jax.microfacet import interface_integrals as ii  # noqa: E402
 from mitsuba_common import as_vec3, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1200
@@ -97,7 +98,7 @@ def _mi_tables(alpha, eta, dist):
     With specular_reflectance = 0 and nonlinear, eval(wi = node k, wo = n) =
     rho / (1 - rho R) T_k T_63 / (pi eta^2); two albedos give R, then T_63 and T_k.
     """
-    mu = rp.mitsuba_nodes().astype(np.float32).astype(np.float64)
+    mu = ii.mitsuba_nodes().astype(np.float32).astype(np.float64)
     wi = np.stack([np.sqrt(1 - mu * mu), 0 * mu, mu], 1)
     wn = np.tile([0.0, 0.0, 1.0], (len(mu), 1))
     v1 = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, True, (0.5,) * 3, 0.0), wi, wn)[0][:, 0]
@@ -197,7 +198,7 @@ def test_specular_lobe_matches_mitsuba(dist, alpha, eta):
 def test_model_with_mitsuba_tables_matches_mitsuba(dist, alpha, eta):
     wi, wo = _pairs(dist, alpha)
     t_mi, R_mi = _mi_tables(alpha, eta, dist)
-    tab = rp.CoatTables(jnp.asarray(t_mi), jnp.asarray(R_mi))
+    tab = ii.CoatTables(jnp.asarray(t_mi), jnp.asarray(R_mi))
     for nonlinear in (False, True):
         p = _params(dist, alpha, eta, nonlinear)
         f_mi, pdf_mi = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, nonlinear), wi, wo)
