@@ -78,12 +78,12 @@ class DualParams:
     alpha_back: Real = param(0.0, lo=-math.pi / 4, hi=math.pi / 4, unit="rad", doc="alpha_Back shift adjust")
     beta_back: Real = param(0.0, lo=0.0, unit="rad^2", doc="beta_Back variance adjust (added to sigma_b^2)")
     a_b_denominator: str = static("cube", choices=("cube", "square"),
-                                  doc="Eq. 4.27 second denominator: Zinke's cube (D-H1) or the thesis' square")
+                                  doc="Sadeghi Eq. 4.27 second denominator: Zinke's cube (D-H1) or the thesis' square")
     clamp: str = static("clamp", choices=("clamp", "raw"), doc="max(T_f - directFraction, 0) (D-H5)")
     scatter_color: str = static("include", choices=("include", "exclude"), doc="C_X I_X in f_s^scatter (D-H6)")
     table_angle: str = static("theta_i", choices=("theta_i", "theta_h"), doc="table index angle (D-H7)")
     normalize: str = static("per_theta", choices=("per_theta", "dtheta_dphi", "none"),
-                            doc="Eq. 4.17 normalization (D-H4)")
+                            doc="Sadeghi Eq. 4.17 normalization (D-H4)")
     n_quad: int = static(64, convert=integer(4, 512), doc="Gauss-Legendre nodes per axis for the tables")
 
 

@@ -110,7 +110,7 @@ class Params:
     roughness: Real = param(0.15, lo=0.0, hi=1.0, lo_open=True, unit="1",
                               doc="microfacet roughness beta of the cuticle (GGX/Beckmann)")
     tilt: Real = param(-0.05236, lo=-0.3, hi=0.3, unit="rad",
-                         doc="cuticle scale tilt alpha (Eq. 4.39); > 0 tilts towards the tip")
+                         doc="cuticle scale tilt alpha (Huang Eq. 4.39); > 0 tilts towards the tip")
     eta: Real = param(1.55, lo=1.0, hi=3.0, lo_open=True, unit="1", doc="relative index of refraction")
     sigma_a: Bands = param((0.309, 0.467, 0.891), lo=0.0, unit="1/radius", bands=True,
                             doc="absorption coefficient per unit radius per band")
@@ -121,7 +121,7 @@ class Params:
                          doc="R lobe: Simpson with Smith G, or closed-form GGX without G (App. E)")
     n_intervals: int = static(64, doc="Simpson sub-intervals over the visible azimuths", convert=_even)
     n_paths: int = static(4, doc="internal paths per Simpson node (TT, TRT)", convert=integer(1))
-    n_lobes: int = static(3, doc="lobes: 3 = R, TT, TRT; 4 adds TRRT (Sec. 4.5)", convert=integer(3, 4))
+    n_lobes: int = static(3, doc="lobes: 3 = R, TT, TRT; 4 adds TRRT (Huang Sec. 4.5)", convert=integer(3, 4))
 
     def _validate(self):
         if self.r_mode == "analytic":

@@ -76,8 +76,9 @@ class Params:
     k_d: Real = param(0.3, lo=0.0, hi=1.0, doc="isotropic fraction of the volume scattering")
     gamma_s: Real = param(12.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the surface Gaussian")
     gamma_v: Real = param(24.0, lo=0.0, hi=90.0, lo_open=True, unit="deg", doc="std of the volume Gaussian")
-    theta_d: str = static("half", choices=THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d (Eq. 5.11)")
-    volume_fresnel: str = static("longitudinal", choices=VOLUME_FRESNEL, doc="D-C2: F of the volume term (Eq. 5.10)")
+    theta_d: str = static("half", choices=THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d (Sadeghi Eq. 5.11)")
+    volume_fresnel: str = static("longitudinal", choices=VOLUME_FRESNEL,
+                                 doc="D-C2: F of the volume term (Sadeghi Eq. 5.10)")
 
 
 def gaussian(gamma, x):

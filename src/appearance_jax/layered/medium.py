@@ -79,7 +79,7 @@ class Params:
     g2: Real = param(-0.2, lo=-1.0, hi=1.0, lo_open=True, hi_open=True, unit="1", doc="asymmetry of HG lobe 2")
     alpha: Real = param(0.2, lo=0.0, hi=1.0, lo_open=True, unit="1", doc="platelet SGGX roughness alpha_p")
     theta: Real = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
-                          doc="tilt theta_p of the mean platelet normal about x (Table A.1: degrees)")
+                          doc="tilt theta_p of the mean platelet normal about x (Padrón Table A.1: degrees)")
 
 
 FIELDS = ("c_d", "albedo_d", "albedo_p", "w_g", "g1", "g2", "alpha", "theta")

@@ -59,7 +59,7 @@ class Params:
     alpha: Real = param(0.3, lo=0.0, hi=1.0, lo_open=True, unit="1",
                           doc="platelet SGGX roughness alpha_p (1 = isotropic flakes)")
     theta: Real = param(0.0, lo=0.0, hi=math.pi / 2, unit="rad",
-                          doc="tilt theta_p of the mean flake normal about the tangent x (Table A.1: degrees)")
+                          doc="tilt theta_p of the mean flake normal about the tangent x (Padrón Table A.1: degrees)")
 
 
 # ------------------------------------------------------------------------------------

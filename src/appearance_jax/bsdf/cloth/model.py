@@ -155,14 +155,14 @@ class Params:
     family_angle: Real = param((0.0, 90.0), lo=-360.0, hi=360.0, unit="deg",
                                  doc="direction of each family in the surface plane")
     rotation: Real = param(0.0, lo=-360.0, hi=360.0, unit="deg", doc="rotation of the weave about the normal")
-    masking_width: float = static(20.0, convert=_width, doc="std (deg) of u() in Eqs. 5.16, 5.19 (D-C5)")
+    masking_width: float = static(20.0, convert=_width, doc="std (deg) of u() in Sadeghi Eqs. 5.16, 5.19 (D-C5)")
     n_samples: int = static(64, convert=integer(1, 1024), doc="T, samples per tangent curve (D-C9)")
     theta_d: str = static("half", choices=thread.THETA_D, doc="D-C1: theta_d in 1/cos^2 theta_d")
     volume_fresnel: str = static("longitudinal", choices=thread.VOLUME_FRESNEL, doc="D-C2: volume Fresnel")
     tangent_sign: int = static(1, choices=(1, -1), doc="D-C6: t = cos a u + sign sin a N")
-    masking: bool = static(True, choices=(True, False), doc="masking/shadowing M (Eqs. 5.14-5.16)")
-    reweighting: bool = static(True, choices=(True, False), doc="reweighting P (Eqs. 5.18-5.19)")
-    normalization: str = static("all", choices=("all", "per_family"), doc="denominator of Eq. 5.20")
+    masking: bool = static(True, choices=(True, False), doc="masking/shadowing M (Sadeghi Eqs. 5.14-5.16)")
+    reweighting: bool = static(True, choices=(True, False), doc="reweighting P (Sadeghi Eqs. 5.18-5.19)")
+    normalization: str = static("all", choices=("all", "per_family"), doc="denominator of Sadeghi Eq. 5.20")
     n_rotations: int = static(1, convert=integer(1, 64),
                               doc="average over this many weave rotations 360 k / K deg (1 = off)")
     incident_cosine: str = static("patch", choices=("patch", "thread"),
@@ -170,7 +170,7 @@ class Params:
     thread_energy: str = static("capped", choices=("capped", "thesis"),
                                 doc="D-C10: f_s / max(1, rho) per tangent sample (default) or as in the thesis")
     normalization_floor: str = static("grazing", choices=FLOORS,
-                                      doc="D-C11: Eq. 5.20's denominator floored at sum_k a_k P(t_k, w_i) above "
+                                      doc="D-C11: Sadeghi Eq. 5.20's denominator floored at sum_k a_k P(t_k, w_i) above "
                                           "75 deg incidence (default), at every incidence, or never (the thesis)")
 
     def _validate(self):

@@ -126,7 +126,7 @@ class Params:
                           doc="absorbing-layer thickness delta_1 (only sigma_a * depth matters)")
     kd: Bands = param(0.3, lo=0.0, hi=1.0, unit="1", doc="albedo of the diffuse reflector", bands=True)
     absorption: str = static("product", choices=ABSORPTION_FORMS,
-                             doc="f_1 absorption: Eq. 3.6 as printed, or the Beer double pass")
+                             doc="f_1 absorption: Padrón Eq. 3.6 as printed, or the Beer double pass")
     underside: str = static("top", choices=UNDERSIDE_MODES,
                             doc="film reflectance from below: top-side R (D14) or Airy from eta2")
     color: str = static("rgb3", choices=spectral.COLOR_MODES, doc="output bands: rgb3, cie or spectral")
