@@ -175,6 +175,14 @@ def layer_edges(graph: dict[str, set[str]]) -> dict[str, set[str]]:
     return out
 
 
+def _short(module: str, f: Path) -> str:
+    """A module's name inside its layer: ``cloth.model``; a package by its folder, ``cloth/``."""
+    inner = ".".join(module.split(".")[2:])
+    if f.name == "__init__.py":
+        return f"{inner}/" if inner else "__init__"
+    return inner or module.split(".")[-1]
+
+
 def _lines(f: Path) -> int:
     return f.read_text(encoding="utf-8").count("\n")
 
@@ -198,8 +206,7 @@ def generated(modules: dict[str, Path] | None = None) -> str:
     out += ["```", "", "| rank | layer | imports | modules |", "|---|---|---|---|"]
     for r, names in enumerate(LAYERS):
         for name in names:
-            mods = sorted(m.split(".", 2)[2] if m.count(".") > 1 else "__init__"
-                          for m in modules if layer_of(m) == name)
+            mods = sorted(_short(m, modules[m]) for m in modules if layer_of(m) == name)
             deps = ", ".join(f"`{b}`" for b in sorted(edges.get(name, ()))) or "-"
             out.append(f"| {r} | `{name}` | {deps} | {', '.join(f'`{m}`' for m in mods)} |")
     up, circ, extra = upward_imports(graph), circles(graph), unlisted(modules)
