@@ -107,7 +107,9 @@ GRID: dict[str, list[Case]] = {
     # one-angle weave families for fitting (orientation-averaged cloth): the BRDF form of cloth,
     # not reciprocal; 2 rotations and T = 4 keep it cheap
     "cloth_weave": [
-        Case("twill_T4", dict(weave="twill", alpha=20.0, n_rotations=2, n_samples=4)),
+        # gradients: cloth's case covers the kernel, SLOW_GRID the weave families (20 s here)
+        Case("twill_T4", dict(weave="twill", alpha=20.0, n_rotations=2, n_samples=4),
+             opts={"skip": ("gradients",)}),
     ],
     # Sadeghi's thread BCSDF (fiber frame, x = tangent): reciprocal; not normalised (the Linen
     # thread sends out ~1.8x what it intercepts at normal incidence, docs/cloth.md): no furnace
