@@ -354,11 +354,16 @@ CHECKS = {"reciprocity": _reciprocity, "furnace": _furnace, "sampling": _samplin
           "gradients": _gradients}
 
 
+def _skip_if_asked(name, case, check):
+    """A case's ``opts["skip"]`` (the furnace reports its own skip)."""
+    if check != "furnace" and check in case.opts.get("skip", ()):
+        pytest.skip(f"{name}/{case.id}: {check} skipped in this case (see its comment in the grid)")
+
+
 @pytest.mark.parametrize("check", list(CHECKS))
 @pytest.mark.parametrize("name,case", CASES)
 def test_property(name, case, check):
-    if check != "furnace" and check in case.opts.get("skip", ()):
-        pytest.skip(f"{name}/{case.id}: {check} skipped in this case (see its comment in GRID)")
+    _skip_if_asked(name, case, check)
     model, params = _setup(name, case)
     CHECKS[check](model, params, case)
 
@@ -367,6 +372,7 @@ def test_property(name, case, check):
 @pytest.mark.parametrize("check", list(CHECKS))
 @pytest.mark.parametrize("name,case", SLOW_CASES)
 def test_property_wide(name, case, check):
+    _skip_if_asked(name, case, check)
     model, params = _setup(name, case)
     kw = dict(n_tests=len(SLOW_CASES)) if check == "chi2" else {}
     CHECKS[check](model, params, case, scale=2, **kw)
