@@ -12,7 +12,7 @@ patch, and has a tangent curve (``offsets``, ``lengths``; :mod:`.weave`) sampled
 local normal n(alpha) = -sin(alpha) u_j + cos(alpha) N and v_j = N x u_j scatters with the thread
 BCSDF f_s of :mod:`appearance_jax.bcsdf.thread` (Sadeghi Eq. 5.11) with family j's parameters,
 is masked by M(t) (Sadeghi Eqs. 5.14-5.16) and reweighted by its projected length P(t) (Sadeghi
-Sadeghi Eqs. 5.18-5.19):
+Eqs. 5.18-5.19):
 
     R(w_i, w_r) = sum_j a_j [sum_{t in C_j} f_s(t, w_i, w_r) M(t) P(t) cos theta_i(t)] / sum_{k in C} P(k)   (5.12, 5.20)
 
@@ -20,7 +20,7 @@ with C = C_1 u ... u C_J (J T samples) and cos theta_i(t) = sqrt(1 - (w_i.t)^2) 
 (curve-irradiance) cosine of Sadeghi Eq. 5.6.
 
 **Output convention (D-C4).** The thesis' L_r(w_r) = int L_i(w_i) R(w_i, w_r) dw_i (Sadeghi
-Sadeghi Eq. 5.20) makes R a *radiance response* with no N.w_i (:func:`radiance_response`); :func:`eval`
+Eq. 5.20) makes R a *radiance response* with no N.w_i (:func:`radiance_response`); :func:`eval`
 returns the BRDF
 
     f(w_i, w_r) = R(w_i, w_r) / (N . w_i)                           (1/sr)
