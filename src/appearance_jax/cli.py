@@ -203,11 +203,9 @@ def plot_in_plane(path, curves, title):
 
 
 def _luminance(f):
-    from .core.spectral import LUMINANCE_WEIGHTS
+    from .core.spectral import luminance_or_mean
 
-    if f.shape[-1] == 3:
-        return f @ LUMINANCE_WEIGHTS
-    return f.mean(axis=-1)
+    return np.asarray(luminance_or_mean(np.asarray(f, np.float64)))
 
 
 def cmd_models(args) -> int:

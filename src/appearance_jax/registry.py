@@ -63,7 +63,7 @@ def _parse_sum(name: str) -> list[str]:
 
 def _build_sum(parts: list[str], reg: dict[str, Model], whole: str) -> Model:
     for part in parts:
-        if part not in reg or "+" in part:
+        if part not in reg:  # a listed composite is no part either: parts hold no "+"
             raise _unknown(part, reg, whole)
     key = "+".join(parts)
     return sum_model(*(reg[part] for part in parts), name=key, rebuild=_composite_params)

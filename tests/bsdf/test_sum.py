@@ -116,6 +116,12 @@ def test_field_union_and_collision_prefix_rule():
     from appearance_jax.core.params import param_specs
     assert param_specs(m.Params)["rough_plastic_1_eta"] == param_specs(rough_plastic.Params)["eta"]
     assert m.Params.__dataclass_fields__["rough_plastic_1_eta"].default == 1.5
+    # and the component's annotation: rough_conductor's eta is per band, rough_plastic's is not
+    import typing
+
+    from appearance_jax.core.params import Bands, Real
+    hints = typing.get_type_hints(m.Params)
+    assert hints["eta"] == Bands and hints["rough_plastic_1_eta"] == Real and hints["tables"] is str
     # the index is the position in the sum; non-identifier characters of a nested sum's name -> "_"
     m3 = sum_model(registry.get("lambert"), CL)
     assert list(m3.Params.__dataclass_fields__)[-1] == "rough_conductor_lambert_1_reflectance"

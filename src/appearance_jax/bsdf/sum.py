@@ -114,14 +114,17 @@ def _prefix(name: str, index: int) -> str:
     return f"{re.sub(r'[^0-9A-Za-z_]', '_', name)}_{index}_"
 
 
-def _field_plan(models: list[Model]) -> tuple[list[dataclasses.Field], tuple[tuple[tuple[str, str], ...], ...]]:
-    """The composite's fields (copies with the components' metadata) and, per component,
-    its (composite field, component field) pairs. Later colliding names get a prefix."""
+def _field_plan(models: list[Model]) -> tuple[list[dataclasses.Field], tuple[tuple[tuple[str, str], ...], ...], dict]:
+    """The composite's fields (copies with the components' metadata), per component its
+    (composite field, component field) pairs, and each composite field's annotation (its
+    component's: Real, Bands, str, ...). Later colliding names get a prefix."""
     taken: dict[str, str] = {}  # composite field -> owner description (for error messages)
     fields: list[tuple[str, dataclasses.Field]] = []
     mapping = []
+    types: dict[str, Any] = {}
     for k, m in enumerate(models):
         pairs = []
+        hints = typing.get_type_hints(m.Params)
         for f in dataclasses.fields(m.Params):
             if _META_KEY not in f.metadata:
                 continue
@@ -142,28 +145,14 @@ def _field_plan(models: list[Model]) -> tuple[list[dataclasses.Field], tuple[tup
                 kw["default_factory"] = f.default_factory
             fields.append((new, dataclasses.field(**kw)))
             pairs.append((new, f.name))
+            types[new] = hints[f.name]
         mapping.append(tuple(pairs))
-    return fields, tuple(mapping)
-
-
-def _component_field(composite_field: str, mapping) -> str:
-    """The component field a composite field stands for."""
-    for pairs in mapping:
-        for s, c in pairs:
-            if s == composite_field:
-                return c
-    return composite_field
+    return fields, tuple(mapping), types
 
 
 def _make_params(name: str, models: list[Model], rebuild) -> type:
     """The composite's params class, labelled ``<name>.Params`` in validation errors and reprs."""
-    fields, mapping = _field_plan(models)
-    # each field keeps its component's annotation (Real, Bands, str, ...)
-    hints = {}
-    for m in models:
-        for n, t in typing.get_type_hints(m.Params).items():
-            hints.setdefault(n, t)
-    annotations = {n: hints.get(_component_field(n, mapping), object) for n, _ in fields}
+    fields, mapping, annotations = _field_plan(models)
 
     def split(self):
         """The components' parameter objects (one per component) built from this one."""
