@@ -113,7 +113,7 @@ def ellipse_normal(py, pz, b):
 
 
 def arc_element(g, b):
-    """dl / dg = sqrt(1 - e^2 sin^2 g): arc length per unit ellipse parameter (Eq. 4.26)."""
+    """dl / dg = sqrt(1 - e^2 sin^2 g): arc length per unit ellipse parameter (Huang Eq. 4.26)."""
     return safe_sqrt(1.0 - (1.0 - b * b) * jnp.sin(g) ** 2)
 
 
