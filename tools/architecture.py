@@ -38,6 +38,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("bsdf", "flatland", "soapfilm"),
     ("registry",),  # name -> model: above every model, read by the fitters and the CLI
     ("fit", "testing"),
+    ("export",),  # fitted parameters -> renderers: reads the registry and the fit records
     ("cli",),
 ]
 # the package's __init__ and the shipped-data accessor sit outside the layers: anyone may import them

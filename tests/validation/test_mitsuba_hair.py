@@ -57,12 +57,12 @@ import pytest
 mi = pytest.importorskip("mitsuba")
 mi.set_variant("scalar_rgb")
 
-import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 from appearance_jax.bcsdf import chiang  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
-from mitsuba_common import max_rel_error  # noqa: E402
+from mitsuba_common import (  # noqa: E402
+    MITSUBA_LUMINANCE, hair_front, hair_ours, hair_pairs, hair_to_mitsuba, max_rel_error, mitsuba_offset)
 
 N_PAIRS = 1200
 TINY = 1e-3
@@ -75,98 +75,6 @@ CONFIGS = [
     ("white_tilt", 0.25, 0.4, -4.0, 0.0, 0.0, 1e-4),
 ]
 
-# Mitsuba 3's (and pbrt's) luminance() weights, which its hair sampler uses to choose a lobe; the
-# library uses core.spectral.LUMINANCE_WEIGHTS (exact sRGB, up to 3e-5 different)
-MITSUBA_LUMINANCE = (0.212671, 0.715160, 0.072169)
-
-
-def _mitsuba_i0(x):
-    """Mitsuba's / pbrt's 10-term power series of I0."""
-    res, x2 = np.ones_like(x), x * x
-    xi, den = x2.copy(), 4.0
-    for i in range(1, 11):
-        res = res + xi / den
-        xi = xi * x2
-        den = den * 4.0 * (i + 1.0) ** 2
-    return res
-
-
-def _mitsuba_log_i0(x):
-    big = x > 12.0
-    xs = np.where(big, x, 1.0)
-    return np.where(big, xs + 0.5 * (np.log(1.0 / (2 * np.pi * xs)) + 1.0 / (8.0 * xs)), np.log(_mitsuba_i0(x)))
-
-
-def _mitsuba_mp(theta_i, theta_o, v):
-    """Mitsuba's longitudinal lobe times 2 pi (float64), with its I0 approximations."""
-    k = 1.0 / v
-    c = np.sin(theta_i) * np.sin(theta_o) * k
-    s = np.cos(theta_i) * np.cos(theta_o) * k
-    with np.errstate(over="ignore"):
-        small = np.exp(-c) * _mitsuba_i0(s) * k / (2.0 * np.sinh(np.minimum(k, 700.0)))
-    large = np.exp(-c + _mitsuba_log_i0(s) - k + 0.6931 + np.log(k / 2.0))
-    return np.where(k > 10.0, large, small)
-
-
-def _to_mitsuba(w):
-    return mi.Vector3f(float(w[1]), float(w[0]), float(w[2]))
-
-
-def _front(wi):
-    """Unit wi on the front side, away from the silhouette: wi.z >= 0.05 |(wi.y, wi.z)|
-    (|h| <= 0.9987; module docstring)."""
-    wi = wi / np.linalg.norm(wi, axis=1, keepdims=True)
-    wi[:, 2] = np.maximum(np.abs(wi[:, 2]), 0.05 * np.abs(wi[:, 1]))
-    return wi / np.linalg.norm(wi, axis=1, keepdims=True)
-
-
-def _pairs(rng, params, n):
-    """wi uniform on the front hemisphere z > 0; wo: a third uniform, two thirds from our sampler at h(wi)."""
-    wi = rng.normal(size=(n, 3))
-    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
-    wi = _front(wi)
-    wo = rng.normal(size=(n, 3))
-    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    Wi = Vec3(*(jnp.asarray(c) for c in wi.T))
-    ws, _, pdf = chiang.sample(params, Wi, jax.random.key(int(rng.integers(1 << 30))),
-                               h=chiang.offset_from_normal(Wi))
-    ws = np.stack([np.asarray(c) for c in ws], axis=1)
-    use = (np.arange(n) % 3 != 0) & (np.asarray(pdf) > 0)
-    wo[use] = ws[use]
-    return wi.astype(np.float32), wo.astype(np.float32)
-
-
-def mitsuba_offset(wi):
-    """h = sin(gamma_i) as Mitsuba computes it, in float32 (module docstring)."""
-    x, z = wi[:, 1].astype(np.float32), wi[:, 2].astype(np.float32)  # Mitsuba's x, z
-    r = np.sqrt(x * x + z * z)
-    g = np.arccos(np.clip(z / np.where(r > 0, r, np.float32(1)), -1, 1)).astype(np.float32)
-    g = np.where(r > 0, g, np.float32(0))
-    return np.sin(np.where(x < 0, g, -g)).astype(np.float32).astype(np.float64)
-
-
-def _ours(params, wi, wo):
-    """Our S cos(theta_o), pdf, and the same with Mitsuba's I0 approximations (float64)."""
-    Wi = Vec3(*(jnp.asarray(c, dtype=jnp.float64) for c in wi.T))
-    Wo = Vec3(*(jnp.asarray(c, dtype=jnp.float64) for c in wo.T))
-    h = jnp.asarray(mitsuba_offset(wi))
-    # the same h as chiang.offset_from_normal up to Mitsuba's float32 acos near gamma = 0
-    assert np.max(np.abs(h - np.asarray(chiang.offset_from_normal(Wi)))) < 1e-3
-    S = np.asarray(chiang.eval(params, Wi, Wo, h=h))
-    pdf = np.asarray(chiang.pdf(params, Wi, Wo, h=h))
-    A, M, N = (np.asarray(a) for a in chiang.lobes(params, Wi, Wo, h=h))
-    theta_i = np.arcsin(np.clip(wi[:, 0].astype(float), -1, 1))
-    theta_o = np.arcsin(np.clip(wo[:, 0].astype(float), -1, 1))
-    ti_p = np.asarray(chiang.tilted_angles(jnp.asarray(theta_i), params.alpha))
-    v = np.stack([np.broadcast_to(np.asarray(x), theta_i.shape) for x in chiang.longitudinal_variances(params.beta_m)])
-    ratio = np.where(M > 0, _mitsuba_mp(ti_p, theta_o[None], v) / np.where(M > 0, M, 1.0), 1.0)
-    cos_o = np.sqrt(np.maximum(1 - wo[:, 0].astype(float) ** 2, 0))
-    f_corr = np.sum(A * (M * ratio * N)[..., None], axis=0)
-    lum = A @ np.asarray(MITSUBA_LUMINANCE)
-    pdf_corr = np.sum(lum / lum.sum(0) * M * ratio * N, axis=0)
-    return S * cos_o[:, None], pdf, f_corr, pdf_corr, A
-
-
 @pytest.mark.parametrize("cfg", CONFIGS, ids=[c[0] for c in CONFIGS])
 def test_eval_pdf_sample_match_mitsuba(cfg):
     name, bm, bn, alpha_deg, eu, pheo, tol = cfg
@@ -174,18 +82,18 @@ def test_eval_pdf_sample_match_mitsuba(cfg):
     params = chiang.Params.from_melanin(eu, pheo, beta_m=bm, beta_n=bn, alpha=np.radians(alpha_deg))
     bsdf = mi.load_dict({"type": "hair", "eumelanin": eu, "pheomelanin": pheo, "int_ior": 1.55, "ext_ior": 1.0,
                          "longitudinal_roughness": bm, "azimuthal_roughness": bn, "scale_tilt": alpha_deg})
-    wi, wo = _pairs(rng, params, N_PAIRS)
+    wi, wo = hair_pairs(rng, params, N_PAIRS)
     ctx = mi.BSDFContext()
     si = mi.SurfaceInteraction3f()
     f_mi = np.zeros((N_PAIRS, 3))
     p_mi = np.zeros(N_PAIRS)
     for j in range(N_PAIRS):
-        si.wi = _to_mitsuba(wi[j])
-        b = _to_mitsuba(wo[j])
+        si.wi = hair_to_mitsuba(wi[j])
+        b = hair_to_mitsuba(wo[j])
         f_mi[j] = np.array(bsdf.eval(ctx, si, b))
         p_mi[j] = bsdf.pdf(ctx, si, b)
 
-    f, pdf, f_corr, pdf_corr, _ = _ours(params, wi, wo)
+    f, pdf, f_corr, pdf_corr, _ = hair_ours(params, wi, wo)
     out = {
         "eval": max_rel_error(f_corr, f_mi, TINY),
         "pdf": max_rel_error(pdf_corr, p_mi, TINY),
@@ -211,7 +119,7 @@ def test_sampling_matches_mitsuba(cfg):
     bsdf = mi.load_dict({"type": "hair", "eumelanin": eu, "pheomelanin": pheo, "int_ior": 1.55, "ext_ior": 1.0,
                          "longitudinal_roughness": bm, "azimuthal_roughness": bn, "scale_tilt": alpha_deg})
     wi = rng.normal(size=(n, 3))
-    wi = _front(wi).astype(np.float32)
+    wi = hair_front(wi).astype(np.float32)
     u = rng.uniform(size=(n, 3)).astype(np.float32)
     ctx = mi.BSDFContext()
     si = mi.SurfaceInteraction3f()
@@ -219,13 +127,13 @@ def test_sampling_matches_mitsuba(cfg):
     p_mi = np.zeros(n)
     w_mi = np.zeros((n, 3))
     for j in range(n):
-        si.wi = _to_mitsuba(wi[j])
+        si.wi = hair_to_mitsuba(wi[j])
         bs, w = bsdf.sample(ctx, si, float(u[j, 0]), mi.Point2f(float(u[j, 1]), float(u[j, 2])))
         wo_mi[j] = [bs.wo[1], bs.wo[0], bs.wo[2]]  # back to our frame
         p_mi[j] = bs.pdf
         w_mi[j] = np.array(w)
     wo32 = wo_mi.astype(np.float32)
-    f, pdf, f_corr, pdf_corr, A = _ours(params, wi, wo32)
+    f, pdf, f_corr, pdf_corr, A = hair_ours(params, wi, wo32)
     ok = p_mi > 0
     assert ok.mean() > 0.99
     rel_pdf = np.abs(pdf_corr[ok] - p_mi[ok]) / p_mi[ok]

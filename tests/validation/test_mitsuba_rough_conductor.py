@@ -31,7 +31,7 @@ import jax.numpy as jnp  # noqa: E402
 from appearance_jax.bsdf import rough_conductor as rc  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
-from mitsuba_common import as_vec3, max_rel_error, walter_beckmann_g1  # noqa: E402
+from mitsuba_common import as_vec3, max_rel_error, reflection_pairs, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1200
 REL_TOL = 1e-4
@@ -50,28 +50,11 @@ CONFIGS = [
     ("beckmann", 0.8, 0.8, GOLD, (1.0, 1.0, 1.0)),
 ]
 
-def _pairs(rng, n, au, av):
-    """Half uniform pairs, half near the specular peak (mirror about a jittered normal)."""
-    wi = rng.normal(size=(n, 3))
-    wi[:, 2] = np.abs(wi[:, 2])
-    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
-    wo = rng.normal(size=(n, 3))
-    wo[:, 2] = np.abs(wo[:, 2])
-    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    half = n // 2
-    h = np.stack([au * rng.normal(size=half), av * rng.normal(size=half), np.ones(half)], axis=1)
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    spec = 2 * np.sum(wi[:half] * h, axis=1, keepdims=True) * h - wi[:half]
-    ok = spec[:, 2] > 1e-3
-    wo[:half][ok] = spec[ok]
-    return wi.astype(np.float32), wo.astype(np.float32)
-
-
 @pytest.mark.parametrize("cfg", CONFIGS, ids=[f"{c[0]}-{c[1]}-{c[2]}" for c in CONFIGS])
 def test_eval_and_pdf_match_mitsuba(cfg):
     dist, au, av, (eta, k), spec = cfg
     rng = np.random.default_rng(zlib.crc32(repr(cfg).encode()))  # fixed per configuration
-    wi, wo = _pairs(rng, N_PAIRS, au, av)
+    wi, wo = reflection_pairs(rng, N_PAIRS, au, av)
     bsdf = mi.load_dict({
         "type": "roughconductor", "distribution": dist, "alpha_u": au, "alpha_v": av,
         "eta": {"type": "rgb", "value": list(eta)}, "k": {"type": "rgb", "value": list(k)},

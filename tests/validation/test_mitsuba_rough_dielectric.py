@@ -36,7 +36,7 @@ import jax.numpy as jnp  # noqa: E402
 from appearance_jax.bsdf import rough_dielectric as rd  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
-from mitsuba_common import as_vec3, max_rel_error, walter_beckmann_g1  # noqa: E402
+from mitsuba_common import as_vec3, dielectric_pairs, max_rel_error, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1500
 REL_TOL = 1e-4
@@ -53,41 +53,11 @@ CONFIGS = [
 ]
 
 
-def _pairs(rng, n, au, av, eta):
-    """A third uniform pairs over the sphere, a third near the specular reflection, a third
-    near the refraction (about a jittered microfacet normal); wi on both sides."""
-    wi = rng.normal(size=(n, 3))
-    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
-    wo = rng.normal(size=(n, 3))
-    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    h = np.stack([au * rng.normal(size=n), av * rng.normal(size=n), np.ones(n)], axis=1)
-    h /= np.linalg.norm(h, axis=1, keepdims=True)
-    h *= np.sign(wi[:, 2:3])  # the normal on wi's side
-    c = np.sum(wi * h, axis=1, keepdims=True)
-    refl = 2 * c * h - wi
-    e = np.where(wi[:, 2:3] > 0, 1.0 / eta, eta)  # eta_i / eta_t seen from wi
-    s2 = e * e * (1 - c * c)
-    tir = s2 >= 1
-    ct = np.sqrt(np.maximum(1 - s2, 0.0))
-    refr = -e * wi + (e * c - ct) * h
-    third = n // 3
-    sel_r = np.zeros(n, bool)
-    sel_r[third:2 * third] = True
-    sel_t = np.zeros(n, bool)
-    sel_t[2 * third:] = True
-    ok_r = sel_r & (refl[:, 2] * wi[:, 2] > 1e-3)
-    ok_t = sel_t & ~tir[:, 0] & (refr[:, 2] * wi[:, 2] < -1e-3)
-    wo[ok_r] = refl[ok_r]
-    wo[ok_t] = refr[ok_t]
-    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
-    return wi.astype(np.float32), wo.astype(np.float32)
-
-
 @pytest.mark.parametrize("cfg", CONFIGS, ids=[f"{c[0]}-{c[1]}-{c[2]}-{c[3]}" for c in CONFIGS])
 def test_eval_and_pdf_match_mitsuba(cfg):
     dist, au, av, eta = cfg
     rng = np.random.default_rng(zlib.crc32(repr(cfg).encode()))  # fixed per configuration
-    wi, wo = _pairs(rng, N_PAIRS, au, av, eta)
+    wi, wo = dielectric_pairs(rng, N_PAIRS, au, av, eta)
     # eta = int_ior / ext_ior; keep ext_ior = 1 where possible (Mitsuba accepts either)
     iors = {"int_ior": eta, "ext_ior": 1.0} if eta >= 1 else {"int_ior": 1.0, "ext_ior": 1.0 / eta}
     bsdf = mi.load_dict({"type": "roughdielectric", "distribution": dist, "alpha_u": au, "alpha_v": av, **iors})

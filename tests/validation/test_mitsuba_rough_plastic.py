@@ -42,7 +42,7 @@ from appearance_jax.bsdf import rough_plastic as rp  # noqa: E402
 from appearance_jax.core.vec import Vec3  # noqa: E402
 from appearance_jax.microfacet import distribution as md  # noqa: E402
 from appearance_jax.microfacet import interface_integrals as ii  # noqa: E402
-from mitsuba_common import as_vec3, walter_beckmann_g1  # noqa: E402
+from mitsuba_common import as_vec3, mi_eval_pdf, walter_beckmann_g1  # noqa: E402
 
 N_PAIRS = 1200
 TINY = 1e-5  # Mitsuba's f cos theta_o below this (1/sr) is not compared
@@ -78,19 +78,6 @@ def _mi_bsdf(alpha, eta, dist, nonlinear=False, rho=RHO, spec=None):
     return mi.load_dict(d)
 
 
-def _mi_eval_pdf(bsdf, wi, wo):
-    ctx = mi.BSDFContext()
-    si = mi.SurfaceInteraction3f()
-    f = np.zeros((len(wi), 3))
-    pdf = np.zeros(len(wi))
-    for k in range(len(wi)):
-        si.wi = mi.Vector3f(*wi[k])
-        v = mi.Vector3f(*wo[k])
-        f[k] = np.array(bsdf.eval(ctx, si, v))
-        pdf[k] = bsdf.pdf(ctx, si, v)
-    return f, pdf
-
-
 @functools.lru_cache(maxsize=None)
 def _mi_tables(alpha, eta, dist):
     """Mitsuba's T at its 64 nodes and its R_int, read back from its diffuse-only eval.
@@ -101,8 +88,8 @@ def _mi_tables(alpha, eta, dist):
     mu = ii.mitsuba_nodes().astype(np.float32).astype(np.float64)
     wi = np.stack([np.sqrt(1 - mu * mu), 0 * mu, mu], 1)
     wn = np.tile([0.0, 0.0, 1.0], (len(mu), 1))
-    v1 = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, True, (0.5,) * 3, 0.0), wi, wn)[0][:, 0]
-    v2 = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, True, (0.25,) * 3, 0.0), wi, wn)[0][:, 0]
+    v1 = mi_eval_pdf(_mi_bsdf(alpha, eta, dist, True, (0.5,) * 3, 0.0), wi, wn)[0][:, 0]
+    v2 = mi_eval_pdf(_mi_bsdf(alpha, eta, dist, True, (0.25,) * 3, 0.0), wi, wn)[0][:, 0]
     r = v1[-1] / v2[-1]  # = 2 (1 - R/4) / (1 - R/2)
     R = (r - 2.0) / (0.5 * r - 0.5)
     scale = (1.0 - 0.5 * R) / 0.5 * np.pi * eta * eta  # T_k T_63 = v1 * scale
@@ -181,7 +168,7 @@ def _params(dist, alpha, eta, nonlinear=False, rho=RHO):
 def test_specular_lobe_matches_mitsuba(dist, alpha, eta):
     wi, wo = _pairs(dist, alpha)
     p = _params(dist, alpha, eta, rho=(0.0,) * 3)
-    f_mi, pdf_mi = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, rho=(0.0,) * 3), wi, wo)
+    f_mi, pdf_mi = mi_eval_pdf(_mi_bsdf(alpha, eta, dist, rho=(0.0,) * 3), wi, wo)
     f, pdf = _ours(p, rp.coat_tables(p), wi, wo)
     big = f_mi > TINY
     assert big[:, 0].sum() >= 0.3 * N_PAIRS  # the lobe is really exercised
@@ -201,7 +188,7 @@ def test_model_with_mitsuba_tables_matches_mitsuba(dist, alpha, eta):
     tab = ii.CoatTables(jnp.asarray(t_mi), jnp.asarray(R_mi))
     for nonlinear in (False, True):
         p = _params(dist, alpha, eta, nonlinear)
-        f_mi, pdf_mi = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, nonlinear), wi, wo)
+        f_mi, pdf_mi = mi_eval_pdf(_mi_bsdf(alpha, eta, dist, nonlinear), wi, wo)
         f, pdf = _ours(p, tab, wi, wo)
         big = f_mi > TINY
         assert big.mean() > 0.99
@@ -235,7 +222,7 @@ def test_public_model_vs_mitsuba(dist):
         wi, wo = _pairs(dist, alpha)
         for nonlinear in (False, True):
             p = _params(dist, alpha, eta, nonlinear)
-            f_mi, _ = _mi_eval_pdf(_mi_bsdf(alpha, eta, dist, nonlinear), wi, wo)
+            f_mi, _ = mi_eval_pdf(_mi_bsdf(alpha, eta, dist, nonlinear), wi, wo)
             f, _ = _ours(p, rp.coat_tables(p), wi, wo)
             err = _max_rel(f, f_mi, f_mi > TINY)
             # and the public entry point agrees with the kernel used above
