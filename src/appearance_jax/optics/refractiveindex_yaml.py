@@ -16,6 +16,15 @@ entries). Formulas are documented in :mod:`appearance_jax.optics.refractive_inde
 
 Malformed or unsupported files raise ``ValueError`` naming the file and the problem.
 
+The YAML is read defensively (a data file is data, never code): ``yaml.safe_load`` (no Python
+objects are ever constructed), and before it the document is checked event by event: YAML
+anchors and aliases (``&a``, ``*a``, ``<<: *a``) are refused, since nested aliases expand
+exponentially ("billion laughs": 8 lines that stand for 10^8 strings; the database files never
+use them), nesting deeper than :data:`MAX_YAML_DEPTH` levels is refused (the files nest 3 or 4
+deep), and so is a text longer than :data:`MAX_YAML_BYTES` (the largest database files are a few
+hundred kB). A file must be a regular file (a FIFO or device is refused before it is opened),
+in UTF-8.
+
 Example::
 
     from appearance_jax.optics.refractiveindex_yaml import load_material
@@ -33,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..core.files import FileProblem, read_regular_file
 from .refractive_index import (
     FORMULA_NAMES,
     Combined,
@@ -42,6 +52,8 @@ from .refractive_index import (
 )
 
 _UM_TO_NM = 1000.0
+MAX_YAML_BYTES = 16 * 2**20  # refused above this size (text length in characters for a string)
+MAX_YAML_DEPTH = 32  # refused above this nesting of lists and mappings
 
 
 def _fail(source: str, msg: str):
@@ -141,9 +153,37 @@ def _parse_formula(source: str, entry_no: int, kind: str, entry: dict, name: str
                    wavelength_range_nm=(float(r[0]) * _UM_TO_NM, float(r[1]) * _UM_TO_NM), name=name)
 
 
+def _check_events(text: str, source: str) -> None:
+    """Refuse anchors, aliases and deep nesting, from the parser's events (nothing is built)."""
+    depth = 0
+    for ev in yaml.parse(text, Loader=yaml.SafeLoader):
+        where = f"line {ev.start_mark.line + 1}"
+        if isinstance(ev, yaml.AliasEvent) or getattr(ev, "anchor", None) is not None:
+            _fail(source, f"uses a YAML anchor or alias ({where}); they are not accepted in data files "
+                          "(nested aliases expand exponentially): write the values out")
+        if isinstance(ev, (yaml.SequenceStartEvent, yaml.MappingStartEvent)):
+            depth += 1
+            if depth > MAX_YAML_DEPTH:
+                _fail(source, f"nests lists/mappings more than {MAX_YAML_DEPTH} levels deep ({where}); "
+                              "a refractiveindex.info file nests 3 or 4 levels")
+        elif isinstance(ev, (yaml.SequenceEndEvent, yaml.MappingEndEvent)):
+            depth -= 1
+
+
 def parse_refractiveindex_yaml(text: str, source: str = "<string>", name: str | None = None):
-    """Parse the YAML text of a refractiveindex.info file; ``source`` names it in errors."""
+    """Parse the YAML text of a refractiveindex.info file; ``source`` names it in errors.
+
+    Raises:
+        ValueError: ``refractiveindex.info file {source}: ...``: not YAML, anchors or aliases,
+            nesting deeper than :data:`MAX_YAML_DEPTH`, longer than :data:`MAX_YAML_BYTES`
+            characters, or not a valid database file.
+    """
+    if not isinstance(text, str):
+        _fail(source, f"text must be a str, got {type(text).__name__}")
+    if len(text) > MAX_YAML_BYTES:
+        _fail(source, f"has {len(text)} characters, more than the limit of {MAX_YAML_BYTES}")
     try:
+        _check_events(text, source)
         doc = yaml.safe_load(text)
     except yaml.YAMLError as e:
         _fail(source, f"is not valid YAML ({e})")
@@ -205,13 +245,28 @@ def load_refractiveindex_yaml(path, name: str | None = None):
 
     Returns a model callable on wavelengths in nm -> ``(n, k)``; ``name`` (default: the
     file stem) is used in its error messages.
+
+    Raises:
+        ValueError: ``refractiveindex.info file {path}: ...``: missing or unreadable, not a regular
+            file (checked before opening, so a FIFO cannot block), larger than
+            :data:`MAX_YAML_BYTES`, not UTF-8, or malformed (:func:`parse_refractiveindex_yaml`).
     """
-    source = os.fspath(path) if isinstance(path, (str, os.PathLike)) else str(path)
+    on_disk = isinstance(path, (str, os.PathLike))
+    source = os.fspath(path) if on_disk else str(path)
     try:
-        text = Path(source).read_text(encoding="utf-8") if isinstance(path, (str, os.PathLike)) \
-            else path.read_text(encoding="utf-8")
+        # a shipped resource that is not a file on disk (e.g. in a zip) is read through its own API
+        data = read_regular_file(source, MAX_YAML_BYTES) if on_disk else path.read_bytes()
+    except FileProblem as e:
+        _fail(source, e.problem)
     except OSError as e:
         raise ValueError(f"refractiveindex.info file {source}: cannot be read ({e})") from e
+    if len(data) > MAX_YAML_BYTES:
+        _fail(source, f"file has {len(data)} bytes, more than the limit of {MAX_YAML_BYTES} bytes")
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data[:e.start].count(b"\n") + 1
+        _fail(source, f"is not UTF-8 text (byte 0x{data[e.start]:02x} on line {line}); save it as UTF-8")
     return parse_refractiveindex_yaml(text, source=source, name=name)
 
 
@@ -237,4 +292,5 @@ def load_material(name: str):
     return load_refractiveindex_yaml(data_path("refractive_index", name + ".yml"), name=name)
 
 
-__all__ = ["load_refractiveindex_yaml", "parse_refractiveindex_yaml", "load_material", "available_materials"]
+__all__ = ["load_refractiveindex_yaml", "parse_refractiveindex_yaml", "load_material", "available_materials",
+           "MAX_YAML_BYTES", "MAX_YAML_DEPTH"]

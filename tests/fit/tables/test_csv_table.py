@@ -123,7 +123,7 @@ def test_round_trip_spectral_with_sigma_and_missing(tmp_path):
 
 def test_round_trip_keeps_values_and_sigma_to_9_digits(tmp_path):
     t = Table.in_plane(np.deg2rad([10.0, 20.0]), np.deg2rad([-10.0, 20.0]),
-                       np.array([[1.0 / 3, 2e-7, 12345.678901], [np.pi, 0.0, -1e-3]]),
+                       np.array([[1.0 / 3, 2e-7, 12345.678901], [np.pi, 0.0, 1e-300]]),
                        sigma=np.full((2, 3), 1.0 / 7))
     p = tmp_path / "digits.csv"
     write_csv(t, p)
@@ -142,9 +142,9 @@ def test_missing_values_masked_and_counted(tmp_path):
     t = read_csv(p)
     assert t.n_samples == 3
     np.testing.assert_array_equal(t.mask, [[1, 1, 1], [0, 0, 0], [0, 1, 1]])
-    assert t.masked == {"missing value": 4}
+    assert t.masked == {"missing value": 1, "missing value (whole row)": 3}
     assert np.all(np.isnan(t.values[~t.mask])) and np.all(np.isnan(t.sigma[~t.mask]))
-    assert "4 missing value" in t.summary()
+    assert "1 missing value, 3 missing value (whole row)" in t.summary()
 
 
 def test_reflectance_factor_to_brdf(tmp_path):

@@ -1,7 +1,8 @@
 """Measurement tables: the :class:`Table` record, reading, writing and converting them.
 
 Modules: ``table`` (the Table record, unit conversions, in-plane geometry), ``csv_table`` (the
-CSV schema), ``merl`` (MERL .binary), ``proxy`` (Neural-BRDF proxies of MERL), ``grids`` (angle
+CSV schema: reading), ``csv_write`` (writing it), ``csv_cells`` (its error type, column names,
+mask reasons and strict number syntax), ``merl`` (MERL .binary), ``proxy`` (Neural-BRDF proxies of MERL), ``grids`` (angle
 grids) and ``io`` (dispatch on the file name: :func:`read_table`, :func:`write_table`).
 """
 

@@ -54,7 +54,7 @@ def _check_file(p: str) -> None:
         raise ValueError(f"{p} is a directory, not a table file")
 
 
-def read_table(spec, *, stride: int | None = None) -> Table:
+def read_table(spec, *, stride: int | None = None, max_bytes: int | None = None) -> Table:
     """A :class:`~appearance_jax.fit.tables.table.Table` from ``spec`` (see the module docstring).
 
     Args:
@@ -62,6 +62,9 @@ def read_table(spec, *, stride: int | None = None) -> Table:
         stride: MERL bin stride for ``.binary`` files (default 3) and ``proxy:NAME:merl``
             (default 5); must divide 90 and 180. Given for any other form it is an error
             (it would be silently ignored otherwise).
+        max_bytes: size limit of a ``.csv`` file (default
+            :data:`~appearance_jax.fit.tables.csv_table.MAX_CSV_BYTES`, 64 MiB), checked before
+            reading; CSV only (a MERL file has a fixed size).
 
     Raises:
         ValueError: unknown form, unknown proxy name or grid, misplaced or invalid ``stride``.
@@ -73,14 +76,16 @@ def read_table(spec, *, stride: int | None = None) -> Table:
     text = os.fspath(spec)
     if isinstance(text, bytes):
         text = os.fsdecode(text)
+    low = text.lower()
+    if max_bytes is not None and not low.endswith(".csv"):
+        raise ValueError(f"{text}: max_bytes applies to .csv tables only")
     if text.startswith("proxy:"):
         return _read_proxy(text, stride)
-    low = text.lower()
     if low.endswith(".csv"):
         if stride is not None:
             raise ValueError(f"{text}: stride applies to MERL .binary files and proxy:NAME:merl, not to CSV tables")
         _check_file(text)
-        return read_csv(text)
+        return read_csv(text, max_bytes=max_bytes)
     if low.endswith(".binary"):
         _check_file(text)
         from .merl import read_merl_table

@@ -30,6 +30,7 @@ import os
 
 import numpy as np
 
+from ...core.files import FileProblem, open_regular_file
 from .csv_table import TableError
 from .grids import MERL_SHAPE, half_diff_to_angles, merl_angles
 from .table import Table
@@ -61,22 +62,34 @@ def read_merl(path) -> np.ndarray:
         BRDF in 1/sr (linear RGB); NaN where the file has a negative (missing) sample.
 
     Raises:
-        TableError: ``{path}: ...`` for a short file, a wrong header, a wrong size or NaN/inf values.
+        TableError: ``{path}: ...`` for a file that is not a regular file (a FIFO, a device: refused
+            before it is opened), a short file, a wrong header, a wrong size (header and size are
+            checked before the body is read) or NaN/inf values.
+        OSError: the file does not exist or cannot be read.
     """
     p = os.fspath(path)
-    with open(p, "rb") as f:
-        data = f.read()
-    if len(data) < _HEADER_BYTES:
-        raise TableError(f"{p}: {len(data)} bytes, too short for the MERL header "
-                         f"({_HEADER_BYTES} bytes: 3 x int32 bin counts)")
-    header = tuple(int(v) for v in np.frombuffer(data, dtype="<i4", count=3))
-    if header != MERL_SHAPE:
-        raise TableError(f"{p}: MERL header gives bin counts {header}, expected {MERL_SHAPE} "
-                         "(not a MERL .binary file, or a different resolution)")
-    if len(data) != MERL_FILE_BYTES:
-        raise TableError(f"{p}: file has {len(data)} bytes, expected {MERL_FILE_BYTES} "
-                         f"(12-byte header + 3 x 90 x 90 x 180 float64)")
-    raw = np.frombuffer(data, dtype="<f8", offset=_HEADER_BYTES).reshape((3,) + MERL_SHAPE)
+    try:
+        f, size = open_regular_file(p)  # a FIFO or device is refused before it is opened
+    except FileProblem as e:
+        raise TableError(f"{p}: {e.problem} (a MERL .binary file is expected)") from None
+    with f:
+        # header and size are checked before the body is read: a large file that is not a
+        # MERL file costs 12 bytes of reading, not its size in memory
+        head = f.read(_HEADER_BYTES) if size >= _HEADER_BYTES else b""
+        if len(head) != _HEADER_BYTES:
+            raise TableError(f"{p}: {len(head) if head else size} bytes, too short for the MERL header "
+                             f"({_HEADER_BYTES} bytes: 3 x int32 bin counts)")
+        header = tuple(int(v) for v in np.frombuffer(head, dtype="<i4", count=3))
+        if header != MERL_SHAPE:
+            raise TableError(f"{p}: MERL header gives bin counts {header}, expected {MERL_SHAPE} "
+                             "(not a MERL .binary file, or a different resolution)")
+        # the body is read only when the size is right (re-checked: the file may change meanwhile)
+        body = f.read(MERL_FILE_BYTES - _HEADER_BYTES + 1) if size == MERL_FILE_BYTES else b""
+        if size != MERL_FILE_BYTES or len(body) != MERL_FILE_BYTES - _HEADER_BYTES:
+            got = size if size != MERL_FILE_BYTES else _HEADER_BYTES + len(body)
+            raise TableError(f"{p}: file has {got} bytes, expected {MERL_FILE_BYTES} "
+                             f"(12-byte header + 3 x 90 x 90 x 180 float64)")
+    raw = np.frombuffer(body, dtype="<f8").reshape((3,) + MERL_SHAPE)
     bad = ~np.isfinite(raw)
     if bad.any():
         c, i, j, k = (int(x) for x in np.argwhere(bad)[0])
