@@ -65,6 +65,8 @@ CASES = [
     ("plastic+lambert", "rough_plastic+lambert",
      dict(alpha=0.3, eta=1.45, diffuse_reflectance=(0.3, 0.2, 0.1), reflectance=(0.2, 0.25, 0.3),
           tables="mitsuba", **SEP), PLASTIC_TOL),
+    ("dielectric+lambert", "rough_dielectric+lambert", dict(alpha=0.2, eta=1.5, reflectance=(0.3, 0.2, 0.1), **SEP),
+     TOL),
 ]
 
 
@@ -91,7 +93,7 @@ def test_exported_bsdf_matches_ours(case):
     au = float(kw.get("alpha", 0.3))
     av = float(kw.get("alpha_v") or au)
     ctx = None
-    if model_name == "rough_dielectric":
+    if model_name.startswith("rough_dielectric"):
         wi, wo = dielectric_pairs(rng, N_PAIRS, au, av, kw["eta"])
         ctx = mi.BSDFContext(mi.TransportMode.Importance)  # si.wi = our wi: Mitsuba gives f |wo.z|
     else:
