@@ -18,7 +18,8 @@ from __future__ import annotations
 import os
 import stat
 
-__all__ = ["FileProblem", "file_kind", "regular_file_size", "open_regular_file", "read_regular_file"]
+__all__ = ["FileProblem", "file_kind", "regular_file_size", "open_regular_file", "read_regular_file",
+           "check_output_path"]
 
 
 class FileProblem(ValueError):
@@ -98,3 +99,20 @@ def read_regular_file(path, max_bytes: int | None = None) -> bytes:
     if max_bytes is not None and len(data) > max_bytes:  # grew while being read
         raise FileProblem(f"file has more than the limit of {max_bytes} bytes")
     return data
+
+
+def check_output_path(path) -> None:
+    """Refuse to write to ``path`` when it exists and is not a regular file.
+
+    Opening a FIFO for writing blocks until something reads it, and writing a table to a
+    device or over a directory is never meant; a missing path or a regular file is fine.
+
+    Raises:
+        FileProblem: ``path`` is a FIFO, a device, a directory, ...
+    """
+    try:
+        st = os.stat(os.fspath(path))
+    except FileNotFoundError:
+        return
+    if not stat.S_ISREG(st.st_mode):
+        raise FileProblem(f"is {file_kind(st.st_mode)}, not a regular file to write to")

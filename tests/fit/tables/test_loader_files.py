@@ -109,3 +109,19 @@ def test_read_regular_file_limit_and_kind(tmp_path):
         read_regular_file(p, 4)
     with pytest.raises(FileProblem, match="is a directory"):
         read_regular_file(tmp_path)
+
+
+def test_writers_refuse_a_fifo_or_directory_instead_of_blocking(tmp_path):
+    from appearance_jax.fit.tables.csv_table import write_csv
+    from appearance_jax.fit.tables.merl import write_merl
+    from appearance_jax.fit.tables.table import Table
+
+    fifo = tmp_path / "out.pipe"
+    os.mkfifo(fifo)
+    t = Table.in_plane([0.1], [0.2], np.ones((1, 3)))
+    with deadline(10):
+        with pytest.raises(ValueError, match=re.escape(f"write_csv: {fifo} is a FIFO (named pipe), not a regular "
+                                                       "file to write to")):
+            write_csv(t, fifo)
+        with pytest.raises(ValueError, match=re.escape(f"write_merl: {tmp_path} is a directory")):
+            write_merl(tmp_path, np.zeros((90, 90, 180, 3)))

@@ -10,6 +10,7 @@ import os
 
 import numpy as np
 
+from ...core.files import FileProblem, check_output_path
 from .csv_cells import FULL_ANGLES, IN_PLANE_ANGLES, RGB, SCHEMA_LINE, is_wavelength
 from .table import Table
 
@@ -37,7 +38,8 @@ def write_csv(table: Table, path, in_plane: bool | None = None) -> None:
     Raises:
         ValueError: the table cannot be written in this schema (bands neither RGB nor
             spectral, in_plane=True for an out-of-plane table, directions below the horizon,
-            a valid sample without a finite sigma, no samples).
+            a valid sample without a finite sigma, no samples), or ``path`` exists and is not a
+            regular file (a FIFO, a device, a directory).
     """
     if table.spectral:
         wl = np.asarray(table.wavelengths, dtype=np.float64)
@@ -105,6 +107,10 @@ def write_csv(table: Table, path, in_plane: bool | None = None) -> None:
         if sig is not None:
             cells += [fmt(s, m) for s, m in zip(sig[r], ok)]  # a masked sample has no sigma
         out.append(",".join(cells))
+    try:
+        check_output_path(path)  # opening a FIFO for writing would block
+    except FileProblem as e:
+        raise ValueError(f"write_csv: {os.fspath(path)} {e.problem}") from None
     with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as f:
         f.write("\n".join(out) + "\n")
 

@@ -30,7 +30,7 @@ import os
 
 import numpy as np
 
-from ...core.files import FileProblem, open_regular_file
+from ...core.files import FileProblem, check_output_path, open_regular_file
 from .csv_table import TableError
 from .grids import MERL_SHAPE, half_diff_to_angles, merl_angles
 from .table import Table
@@ -113,7 +113,8 @@ def write_merl(path, brdf) -> None:
         brdf: (90, 90, 180, 3) array, (theta_h, theta_d, phi_d, R/G/B), finite and >= 0 or NaN.
 
     Raises:
-        ValueError: wrong shape, inf, or negative values (they would read back as missing).
+        ValueError: wrong shape, inf, or negative values (they would read back as missing), or
+            ``path`` exists and is not a regular file (a FIFO, a device, a directory).
     """
     f = np.asarray(brdf, dtype=np.float64)
     if f.shape != BRDF_SHAPE:
@@ -126,6 +127,10 @@ def write_merl(path, brdf) -> None:
                          "them as missing samples (use NaN for missing)")
     f = np.moveaxis(f, -1, 0)  # channel-major
     raw = np.where(np.isnan(f), -1.0, f / MERL_SCALE[:, None, None, None])
+    try:
+        check_output_path(path)  # opening a FIFO for writing would block
+    except FileProblem as e:
+        raise ValueError(f"write_merl: {os.fspath(path)} {e.problem}") from None
     with open(os.fspath(path), "wb") as out:
         out.write(np.asarray(MERL_SHAPE, dtype="<i4").tobytes())
         out.write(np.ascontiguousarray(raw, dtype="<f8").tobytes())
