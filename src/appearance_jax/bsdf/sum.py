@@ -159,12 +159,10 @@ def _make_params(name: str, models: list[Model], rebuild) -> type:
         return tuple(m.Params(**{c: getattr(self, s) for s, c in pairs}) for m, pairs in zip(models, mapping))
 
     def _validate(self):
-        for k, (m, sub) in enumerate(zip(models, split(self))):
-            extra = getattr(sub, "_validate", None)
-            if extra is None:
-                continue
+        for k, (m, pairs) in enumerate(zip(models, mapping)):
             try:
-                extra()
+                # constructing the component (concrete values) runs its checks, _validate included
+                m.Params(**{c: getattr(self, s) for s, c in pairs})
             except ValueError as e:
                 renamed = [f"{s} -> {c}" for s, c in mapping[k] if s != c]
                 where = f" (fields renamed: {', '.join(renamed)})" if renamed else ""

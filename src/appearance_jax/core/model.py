@@ -6,18 +6,34 @@ the parameters eagerly and then calls the jitted kernel. The module ends with a
 :class:`Model` record that the registry (``appearance_jax.registry``) lists.
 
 Signatures (directions are unit :class:`~appearance_jax.core.vec.Vec3` pointing away from
-the scattering point, in the local frame of :mod:`appearance_jax.core.frame`):
+the scattering point, in the local frame of :mod:`appearance_jax.core.frame`, z = normal):
 
 - ``eval(params, wi, wo) -> f``: shape ``wi.shape + (n_bands,)``, in 1/sr.
 - ``sample(params, wi, u_or_key) -> (wo, weight, pdf)``: ``weight = f |cos theta_o| / pdf``
   (bands axis; for phase functions ``f / pdf``), ``pdf`` in 1/sr (shape ``wi.shape``).
   Failed samples have ``weight = 0`` and ``pdf = 0``.
 - ``pdf(params, wi, wo) -> pdf``: shape ``wi.shape``.
+
+Inputs at the boundary (eager, i.e. on concrete values; traced calls inside a user's
+``jit`` skip them and the kernels never branch on them):
+
+- ``params`` must be an instance of the model's ``Params`` whose values passed the checks of
+  :mod:`appearance_jax.core.params` (at construction, or here for rebuilt pytrees);
+- every kernel argument named ``wi`` or ``wo`` goes through
+  :func:`~appearance_jax.core.vec.as_direction`: a ``Vec3`` is passed on unchanged (results
+  are bit-identical), an ``(..., 3)`` array or a tuple of 3 numbers is converted, other types
+  raise ``TypeError``; non-finite, zero-length or non-unit vectors (|norm - 1| > 1e-3) raise
+  ``ValueError`` naming the argument. Directions below the horizon or at grazing are valid
+  (reflection models return 0 there).
+
+Under ``jit``, :func:`~appearance_jax.core.params.checked` /
+:func:`~appearance_jax.core.params.check_traced` check parameter ranges with ``checkify``.
 """
 
 from __future__ import annotations
 
 import functools
+import inspect
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
@@ -25,19 +41,34 @@ import jax
 import jax.numpy as jnp
 
 from .params import validate
+from .vec import as_direction
+
+#: kernel arguments that are directions (checked by :func:`boundary`)
+DIRECTION_ARGS = ("wi", "wo")
 
 
 def boundary(kernel: Callable, params_cls: type, static_argnames: tuple[str, ...] = ()) -> Callable:
-    """Public entry point of a kernel: eager validation of ``params`` + one ``jit``.
+    """Public entry point of a kernel: eager validation of ``params`` and directions + one ``jit``.
 
-    Inside a user's own ``jit``/``grad`` the parameters are traced and the check is
-    skipped; the kernel itself never branches on parameter values.
+    Inside a user's own ``jit``/``grad`` the parameters are traced and the checks are
+    skipped; the kernel itself never branches on parameter values. The kernel's arguments
+    named in :data:`DIRECTION_ARGS` are directions (module docstring).
     """
     jitted = jax.jit(kernel, static_argnames=static_argnames)
+    names = list(inspect.signature(kernel).parameters)
+    directions = tuple((n, names.index(n) - 1) for n in DIRECTION_ARGS if n in names[1:])
 
     @functools.wraps(kernel)
     def public(params, *args, **kwargs):
         validate(params, params_cls)
+        if directions:
+            args = list(args)
+            for n, i in directions:
+                if i < len(args):
+                    if args[i] is not None:
+                        args[i] = as_direction(n, args[i])
+                elif kwargs.get(n) is not None:
+                    kwargs[n] = as_direction(n, kwargs[n])
         return jitted(params, *args, **kwargs)
 
     public.kernel = kernel  # the unvalidated, unjitted kernel, for composition
@@ -78,6 +109,10 @@ class Model:
     presets: Mapping[str, Any] = field(default_factory=dict)
     # True for Monte Carlo evaluators: eval(params, wi, wo, key=...) returns (estimate, stderr)
     stochastic: bool = False
+    # physically known parameters that ``appearance-jax fit`` holds fixed unless ``--free NAME``:
+    # name -> (value, reason), e.g. {"eta": (1.5, "coat index of common polymers")}; only where
+    # physics (not the data) fixes the value, or the field is degenerate with another
+    fit_fixed: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
 
     def __post_init__(self):
         if self.kind not in ("bsdf", "phase", "bcsdf"):

@@ -11,15 +11,31 @@ against the direction arrays. Both may have leading axes for spatially varying p
 ``None`` (an optional parameter, e.g. the second roughness of an anisotropic model): it is
 then no pytree leaf, is not validated and is not fitted.
 
-Validation (:func:`validate`) runs eagerly at the public boundary of every model: a
-concrete value that is NaN, infinite or out of range raises a ``ValueError`` that names the
-class, the field, the value and the valid range. Traced values (inside the user's ``jit``)
-are skipped, so kernels stay branch-free.
+Validation happens when a ``Params`` is constructed (``Params(...)``, ``replace``) with
+concrete values, and again at the public boundary of every model (:func:`validate`) for
+objects that were not (pytree rebuilds):
+
+- a value that is not a number (``alpha="x"``, a dict) raises a ``ValueError`` naming the
+  field and the expected type;
+- a value that is NaN, infinite or out of range raises a ``ValueError`` naming the class,
+  the field, the value and the valid range (:func:`check_value`);
+- band fields whose trailing (bands) lengths disagree (``eta`` with 2 values, ``k`` with 3)
+  raise naming both fields and lengths; a length of 1 (or a scalar) broadcasts to any;
+- a class's own cross-field checks (a ``_validate(self)`` method, e.g. the band count that a
+  spectral model computes on) run too.
+
+Traced values (inside ``jit``/``vmap``/``grad``) and abstract ones (``jax.ShapeDtypeStruct``)
+are not checked, so kernels stay branch-free. Pytree unflattening (``jax.tree.map``,
+``jax.eval_shape``, Jacobians, ``vmap`` axis specs such as ``jax.tree.map(lambda _: 0, p)``)
+rebuilds a ``Params`` without converting or checking its leaves. Under ``jit``, where
+eager checks cannot run, :func:`check_traced` emits :mod:`jax.experimental.checkify`
+checks of the same ranges, and :func:`checked` wraps a function so that they are raised.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -29,6 +45,8 @@ import jax.numpy as jnp
 import numpy as np
 
 _META_KEY = "appearance_jax"
+# instance attribute set on a Params whose concrete values passed every check at construction
+_CHECKED = "_appearance_jax_checked"
 
 # Annotations of numeric parameter fields. Both are jax arrays of the default float dtype
 # once a Params is constructed (python numbers, sequences and numpy arrays are converted).
@@ -109,6 +127,49 @@ def _to_array(v):
     return v
 
 
+_HOST_NUMERIC = (bool, int, float, np.ndarray, np.generic)
+_EXPECTED = "a real number, a sequence of real numbers or a real array"
+
+
+def _host_value(label: str, v):
+    """A concrete field value as a float numpy array, or None when it cannot be checked
+    eagerly (None, tracers, abstract values such as ``jax.ShapeDtypeStruct``).
+    Raises ``ValueError`` naming ``label`` and the expected type for a non-number."""
+    if v is None or _is_traced(v):
+        return None
+    if isinstance(v, jax.Array):
+        if not (jnp.issubdtype(v.dtype, jnp.floating) or jnp.issubdtype(v.dtype, jnp.integer)
+                or v.dtype == jnp.bool_):
+            raise ValueError(f"{label} has dtype {v.dtype}: expected {_EXPECTED}")
+        return np.asarray(v, dtype=float)
+    if isinstance(v, (tuple, list)) or isinstance(v, _HOST_NUMERIC):
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            a = None
+        if a is None or (isinstance(v, np.ndarray) and v.dtype.kind not in "biuf"):
+            raise ValueError(f"{label} = {v!r} is not numeric: expected {_EXPECTED}") from None
+        return a
+    if hasattr(v, "shape") and hasattr(v, "dtype"):  # abstract (ShapeDtypeStruct) or array-like
+        return None
+    raise ValueError(f"{label} = {v!r} is not numeric ({type(v).__name__}): expected {_EXPECTED}")
+
+
+def _check_bands(label: str, values: dict[str, np.ndarray]) -> None:
+    """Band fields (name -> concrete value) must agree on their trailing length (1 broadcasts)."""
+    first = None
+    for name, a in values.items():
+        n = a.shape[-1] if a.ndim else 1
+        if n == 1:
+            continue
+        if first is None:
+            first = (name, n)
+        elif n != first[1]:
+            raise ValueError(
+                f"{label}.{name} has {n} bands (trailing axis) but {label}.{first[0]} has {first[1]}: "
+                "band fields must have the same number of bands, or 1 (a scalar broadcasts to every band)")
+
+
 def owner_name(cls) -> str:
     """The name of the module that defines a params class, for messages: "rough_conductor"
     (a model that is a package, ``bsdf/cloth/model.py``, by its package: "cloth")."""
@@ -133,10 +194,26 @@ def params_class(cls):
     def __post_init__(self):
         klass = type(self)
         label = _label(klass)
+        specs = klass.__dataclass_fields__
+        concrete, bands = True, {}
         for name in klass._data_fields:
-            object.__setattr__(self, name, _to_array(getattr(self, name)))
+            v = getattr(self, name)
+            spec = specs[name].metadata.get(_META_KEY)
+            if spec is None:  # a nested pytree (e.g. another Params), checked by its own class
+                concrete = concrete and (v is None or getattr(v, _CHECKED, False))
+                object.__setattr__(self, name, _to_array(v))
+                continue
+            a = _host_value(f"{label}.{name}", v)
+            if a is None:
+                concrete = concrete and v is None
+            else:
+                _check_array(f"{label}.{name}", a, spec)
+                if spec.bands:
+                    bands[name] = a
+            object.__setattr__(self, name, _to_array(v))
+        _check_bands(label, bands)
         for name in klass._static_fields:
-            spec = klass.__dataclass_fields__[name].metadata[_META_KEY]
+            spec = specs[name].metadata[_META_KEY]
             v = getattr(self, name)
             if spec.convert is not None:
                 try:
@@ -150,6 +227,12 @@ def params_class(cls):
                 )
         if user_post_init is not None:
             user_post_init(self)
+        if concrete:
+            extra = getattr(self, "_validate", None)
+            if extra is not None:
+                extra()
+            # every check passed on concrete values: validate() at the public boundary skips them
+            object.__setattr__(self, _CHECKED, True)
 
     cls.__post_init__ = __post_init__
     dc = dataclass(frozen=True)(cls)
@@ -160,8 +243,32 @@ def params_class(cls):
     dc._data_fields = tuple(data)
     dc._static_fields = tuple(meta)
     dc.replace = lambda self, **kw: dataclasses.replace(self, **kw)
-    jax.tree_util.register_dataclass(dc, data_fields=data, meta_fields=meta)
+    _register(dc, tuple(data), tuple(meta))
     return dc
+
+
+def _register(dc, data: tuple, meta: tuple) -> None:
+    """Pytree registration whose unflatten bypasses ``__init__``: JAX rebuilds a Params from
+    leaves that are no parameter values (tracers, ``ShapeDtypeStruct``, the ints and Nones of
+    a ``vmap`` axis spec, Jacobian blocks), which must be neither converted nor checked.
+    Keys are attribute names (``keystr`` gives ``.alpha``), as ``register_dataclass`` has them."""
+    keys = tuple(jax.tree_util.GetAttrKey(n) for n in data)
+
+    def flatten_with_keys(x):
+        return tuple((k, getattr(x, n)) for k, n in zip(keys, data)), tuple(getattr(x, n) for n in meta)
+
+    def flatten(x):
+        return tuple(getattr(x, n) for n in data), tuple(getattr(x, n) for n in meta)
+
+    def unflatten(aux, children):
+        obj = object.__new__(dc)
+        for n, v in zip(meta, aux):
+            object.__setattr__(obj, n, v)
+        for n, v in zip(data, children):
+            object.__setattr__(obj, n, v)
+        return obj
+
+    jax.tree_util.register_pytree_with_keys(dc, flatten_with_keys, unflatten, flatten)
 
 
 def param_specs(params_or_cls) -> dict[str, ParamSpec | StaticSpec]:
@@ -177,35 +284,47 @@ def _is_traced(v) -> bool:
 def validate(params, expected_cls: type | None = None) -> None:
     """Raise ``ValueError`` if any concrete numeric field is non-finite or out of range.
 
-    Traced values are skipped (checks happen eagerly, at the public boundary).
+    Traced values are skipped (checks happen eagerly, at the public boundary). A Params
+    that passed every check at construction is not checked again (it is immutable).
     Classes may add cross-field checks in a ``_validate(self)`` method that raises.
     """
     if expected_cls is not None and not isinstance(params, expected_cls):
         raise TypeError(
             f"expected parameters of type {expected_cls.__qualname__}, got {type(params).__qualname__}"
         )
+    if getattr(params, _CHECKED, False):
+        return
     cls = type(params)
     label = _label(cls)
+    bands, concrete = {}, True
     for name, spec in param_specs(cls).items():
         if isinstance(spec, ParamSpec):
-            check_value(f"{label}.{name}", getattr(params, name), spec)
+            v = getattr(params, name)
+            a = _host_value(f"{label}.{name}", v)
+            if a is None:
+                concrete = concrete and v is None
+                continue
+            _check_array(f"{label}.{name}", a, spec)
+            if spec.bands:
+                bands[name] = a
+    _check_bands(label, bands)
     extra = getattr(params, "_validate", None)
-    if extra is not None and not any(_is_traced(getattr(params, n)) for n in cls._data_fields):
+    if extra is not None and concrete:
         extra()
 
 
 def check_value(label: str, v, spec: ParamSpec) -> None:
     """Raise ``ValueError`` naming ``label`` if a concrete ``v`` is non-finite or outside ``spec``'s range.
 
-    ``None`` and traced values pass (checks happen eagerly, at public boundaries). Used by
-    :func:`validate` and by functions that take bare numbers (e.g. the layered references).
+    ``None``, traced and abstract values pass (checks happen eagerly, at public boundaries).
+    Used by :func:`validate` and by functions that take bare numbers (e.g. the layered references).
     """
-    if v is None or _is_traced(v):  # None: an optional field left unset (no pytree leaf)
-        return
-    try:
-        a = np.asarray(v, dtype=float)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{label} = {v!r} is not numeric") from e
+    a = _host_value(label, v)
+    if a is not None:
+        _check_array(label, a, spec)
+
+
+def _check_array(label: str, a: np.ndarray, spec: ParamSpec) -> None:
     bad = ~np.isfinite(a) | ~spec.contains(a)
     if np.any(bad):
         first = a[bad].flat[0] if a.ndim else a
@@ -215,6 +334,77 @@ def check_value(label: str, v, spec: ParamSpec) -> None:
             + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
             + (f" ({spec.doc})" if spec.doc else "")
         )
+
+
+def check_traced(params) -> None:
+    """Emit :mod:`jax.experimental.checkify` checks that ``params``' fields are finite and in range.
+
+    The traced counterpart of :func:`validate`, for code under ``jit``/``vmap`` where eager
+    checks cannot run. Call it inside a function that is transformed by ``checkify``::
+
+        def f(p, wi, wo):
+            check_traced(p)
+            return rough_conductor.eval(p, wi, wo)
+
+        err, out = checkify.checkify(jax.jit(f))(p, wi, wo)
+        err.throw()  # ValueError: "rough_conductor.Params.alpha = nan is not finite or outside ..."
+
+    (or wrap ``f`` with :func:`checked`). Outside ``checkify`` a traced check is an error (JAX
+    cannot stage it). Band lengths are shapes, known while tracing: a mismatch raises at once.
+    """
+    from jax.experimental import checkify
+
+    cls = type(params)
+    label = _label(cls)
+    bands = {}
+    for name, spec in param_specs(cls).items():
+        v = getattr(params, name)
+        if not isinstance(spec, ParamSpec) or v is None:
+            continue
+        x = jnp.asarray(v)
+        if spec.bands:
+            bands[name] = np.empty(np.shape(x)[-1:])
+        ok = jnp.isfinite(x)
+        ok &= (x > spec.lo) if spec.lo_open else (x >= spec.lo)
+        ok &= (x < spec.hi) if spec.hi_open else (x <= spec.hi)
+        ok = jnp.ravel(ok)
+        first_bad = jnp.ravel(x)[jnp.argmin(ok)] if ok.size else jnp.zeros((), x.dtype)
+        unit = f" [{spec.unit}]" if spec.unit not in ("", "1") else ""
+        checkify.check(jnp.all(ok), f"{label}.{name} = {{}} is not finite or outside the valid range "
+                       f"{spec.range_str()}{unit}", first_bad)
+    _check_bands(label, bands)
+
+
+def _is_params(x) -> bool:
+    return hasattr(type(x), "_data_fields") and dataclasses.is_dataclass(x)
+
+
+def checked(fn):
+    """``fn`` jitted, with every ``Params`` among its arguments checked by :func:`check_traced`.
+
+    ``checked(f)(p, ...)`` runs ``checkify.checkify(jax.jit(...))`` and raises the first failed
+    check as a ``ValueError`` (``checkify.JaxRuntimeError``) that names the class, the field and
+    the offending value, like the eager checks do; otherwise it returns ``f(p, ...)``. Use it
+    for parameters that are computed inside ``jit`` (e.g. from a network or an optimiser).
+    Arguments must be pytrees of arrays (no static arguments).
+    """
+    from jax.experimental import checkify
+
+    def inner(*args, **kwargs):
+        for leaf in jax.tree_util.tree_leaves((args, kwargs), is_leaf=_is_params):
+            if _is_params(leaf):
+                check_traced(leaf)
+        return fn(*args, **kwargs)
+
+    run = checkify.checkify(jax.jit(inner))
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        err, out = run(*args, **kwargs)
+        err.throw()
+        return out
+
+    return wrapper
 
 
 def _as_int(v, strict: bool):

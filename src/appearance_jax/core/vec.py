@@ -7,6 +7,23 @@ GGX evaluation over 1e6 pairs (DESIGN.md, "Conventions"). Spectral bands stay a
 trailing axis of the *values*, not of the vectors.
 
 ``Vec3`` is a JAX pytree, so it passes through ``jit``, ``vmap`` and ``grad`` as is.
+
+Directions (the ``wi``/``wo`` of every model) are **unit vectors pointing away from the
+surface** (both the incident and the outgoing one), in the local shading frame whose z
+axis is the normal (:mod:`appearance_jax.core.frame`). A direction below the horizon or
+exactly at grazing is valid input (a reflection BSDF returns 0 there). The public model
+functions accept (:func:`as_direction`):
+
+- a ``Vec3`` (passed on unchanged, so results are bit-identical to the kernel's);
+- an array of shape ``(..., 3)`` (numpy or jax), split along its last axis;
+- a tuple or list of three real numbers, one direction.
+
+Anything else (a tuple of three arrays is ambiguous: components or three directions?)
+raises a ``TypeError`` naming the argument and the accepted types. Concrete (not traced)
+directions are checked eagerly: a non-finite or zero-length vector raises a ``ValueError``
+naming the argument, and so does one whose norm differs from 1 by more than
+:data:`UNIT_TOLERANCE` (with the measured norm); they are not normalised silently
+(:func:`normalize` does it on request).
 """
 
 from __future__ import annotations
@@ -15,6 +32,7 @@ from typing import Any
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 Array = Any
 
@@ -116,3 +134,80 @@ def normalize(a: Vec3, eps: float = 1e-30) -> Vec3:
 def where(cond: Array, a: Vec3, b: Vec3) -> Vec3:
     """Component-wise ``jnp.where`` for vectors."""
     return Vec3(jnp.where(cond, a.x, b.x), jnp.where(cond, a.y, b.y), jnp.where(cond, a.z, b.z))
+
+
+# --------------------------------------------------------------------------------------
+# Directions at the public boundary
+
+#: |norm - 1| allowed for a direction: float32 unit vectors from trigonometry or a
+#: normalisation are within ~1e-7 of 1; 1e-3 also admits directions stored with 3-4 digits.
+UNIT_TOLERANCE = 1e-3
+_N2_LO, _N2_HI = (1.0 - UNIT_TOLERANCE) ** 2, (1.0 + UNIT_TOLERANCE) ** 2
+_ACCEPTED = "a Vec3, an array of shape (..., 3) or a tuple of 3 numbers"
+
+
+def _is_number(c) -> bool:
+    return isinstance(c, (int, float, np.integer, np.floating)) and not isinstance(c, (bool, np.bool_)) or (
+        isinstance(c, (np.ndarray, jax.Array)) and np.ndim(c) == 0)
+
+
+def as_direction(name: str, w) -> Vec3:
+    """Direction argument ``name`` (``"wi"``, ``"wo"``) of a public function as a checked Vec3.
+
+    Conversions and checks as in the module docstring; traced inputs (inside the user's
+    ``jit``) are converted but not checked. Raises ``TypeError`` for an unsupported type and
+    ``ValueError`` for a non-finite, zero-length or non-unit concrete vector.
+    """
+    if isinstance(w, Vec3):
+        v = w
+    elif isinstance(w, (tuple, list)):
+        if len(w) != 3 or not all(_is_number(c) for c in w):
+            raise TypeError(f"{name}: expected {_ACCEPTED}, got a {type(w).__name__} of length {len(w)}"
+                            + ("" if len(w) != 3 else " whose entries are not all numbers (for arrays of "
+                               "components use Vec3(x, y, z))"))
+        dt = jnp.result_type(float)
+        v = Vec3(*(jnp.asarray(c, dtype=dt) for c in w))
+    elif isinstance(w, (np.ndarray, jax.Array)):
+        if np.ndim(w) < 1 or np.shape(w)[-1] != 3:
+            raise TypeError(f"{name}: expected {_ACCEPTED}, got an array of shape {np.shape(w)}")
+        v = Vec3.from_array(w)
+    else:
+        raise TypeError(f"{name}: expected {_ACCEPTED}, got {type(w).__name__}")
+    check_unit(name, v)
+    return v
+
+
+@jax.jit
+def _any_bad(x, y, z):
+    n2 = x * x + y * y + z * z
+    return jnp.any(~(jnp.isfinite(n2) & (n2 >= _N2_LO) & (n2 <= _N2_HI)))
+
+
+def check_unit(name: str, v: Vec3) -> None:
+    """``ValueError`` naming ``name`` unless every concrete direction of ``v`` is a finite unit
+    vector (within :data:`UNIT_TOLERANCE`); traced components are not checked. Device arrays
+    are checked by one fused reduction; the offending entry is looked up only on failure."""
+    comps = (v.x, v.y, v.z)
+    if any(isinstance(c, jax.core.Tracer) for c in comps):
+        return
+    if any(isinstance(c, jax.Array) for c in comps):
+        bad = _any_bad(*comps)  # under an outer trace (constants closed over) a tracer: check on the host
+        if not isinstance(bad, jax.core.Tracer) and not bool(bad):
+            return
+    comps = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in comps))
+    n2 = comps[0] ** 2 + comps[1] ** 2 + comps[2] ** 2
+    finite = np.isfinite(comps[0]) & np.isfinite(comps[1]) & np.isfinite(comps[2])
+    bad = ~(finite & (n2 >= _N2_LO) & (n2 <= _N2_HI))
+    if not np.any(bad):
+        return
+    idx = tuple(int(i) for i in np.argwhere(bad)[0])
+    at = f" at index {idx}" if idx else ""
+    xyz = "(" + ", ".join(f"{float(c[idx]):g}" for c in comps) + ")"
+    if not finite[idx]:
+        why = "is not finite"
+    elif n2[idx] == 0.0:
+        why = "has zero length"
+    else:
+        why = f"is not a unit vector: its norm is {float(np.sqrt(n2[idx])):.7g} (tolerance {UNIT_TOLERANCE:g})"
+    raise ValueError(f"{name} = {xyz}{at} {why}; directions must be finite unit vectors pointing away from "
+                     "the surface (core.vec.normalize makes one)")
