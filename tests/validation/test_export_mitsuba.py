@@ -277,8 +277,16 @@ def test_export_options_are_checked_first(fitted, tmp_path, capsys):
     bad.write_text(json.dumps({"model": "cloth", "params": {}}))
     with pytest.raises(mx.ExportError, match=r"'cloth' has no Mitsuba 3 equivalent"):
         _export([str(bad)])
-    # a correlated-G2 record: refused, then written with --approximate (and the difference listed)
     rec = json.loads(fitted.read_text())
+    spectral = tmp_path / "spectral.json"
+    spectral.write_text(json.dumps({**rec, "table": {**rec["table"], "wavelengths_nm": [450.0, 550.0, 650.0]}}))
+    with pytest.raises(mx.ExportError, match=r"bands are wavelengths \(450, 550, 650 nm\)"):
+        _export([str(spectral)])
+    stalled = tmp_path / "stalled.json"
+    stalled.write_text(json.dumps({**rec, "converged": False}))
+    assert _export([str(stalled), "--out", str(tmp_path / "s.xml")]) == 0
+    assert "did not converge" in capsys.readouterr().err
+    # a correlated-G2 record: refused, then written with --approximate (and the difference listed)
     rec["params"]["shadowing"] = "correlated"
     corr = tmp_path / "corr.json"
     corr.write_text(json.dumps(rec))
