@@ -18,6 +18,7 @@ measured), and a round trip ``appearance-jax fit`` -> ``params.json`` -> ``appea
 
 import argparse
 import json
+import os
 import zlib
 
 import numpy as np
@@ -270,6 +271,12 @@ def test_export_options_are_checked_first(fitted, tmp_path, capsys):
     with pytest.raises(SystemExit):  # argparse names the option
         _export([str(fitted), "--format", "pbrt"])
     assert "--format: invalid choice: 'pbrt'" in capsys.readouterr().err
+    if hasattr(os, "mkfifo"):  # answered at once, not blocking
+        os.mkfifo(tmp_path / "pipe")
+        with pytest.raises(mx.ExportError, match=r"params.json .*pipe.* is a FIFO"):
+            _export([str(tmp_path / "pipe")])
+        with pytest.raises(mx.ExportError, match=r"--out .*pipe.* is a FIFO"):
+            _export([str(fitted), "--out", str(tmp_path / "pipe")])
     bad = tmp_path / "bad.json"
     bad.write_text("{not json")
     with pytest.raises(mx.ExportError, match=r"is not JSON"):

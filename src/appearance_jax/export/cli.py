@@ -51,6 +51,7 @@ def _check_options(args) -> str:
     """The output kind ('xml' or 'dict'); a ValueError naming the option otherwise."""
     import re
 
+    from ..core.files import FileProblem, check_output_path
     from .mitsuba import ExportError
 
     if args.format not in FORMATS:
@@ -72,6 +73,10 @@ def _check_options(args) -> str:
             raise ExportError(f"--out {out!r}: the folder {parent!r} does not exist")
         if os.path.abspath(out) == os.path.abspath(src):
             raise ExportError(f"--out {out!r} is the input PARAMS_JSON; give another file")
+        try:
+            check_output_path(out)  # a FIFO or a device would block or never be meant
+        except FileProblem as e:
+            raise ExportError(f"--out {out!r} {e.problem}") from None
     if args.kind is not None:
         return args.kind
     return "dict" if out is not None and out.lower().endswith(".json") else "xml"

@@ -55,6 +55,7 @@ from xml.sax.saxutils import escape, quoteattr
 import numpy as np
 
 from .. import registry
+from ..core.files import FileProblem, read_regular_file
 from ..core.model import Model
 from ..core.params import param_specs
 
@@ -353,15 +354,11 @@ def read_params_json(path) -> dict:
     if os.path.isdir(path):
         raise ExportError(f"params.json {path!r} is a directory; give the params.json file a fit wrote "
                           "(appearance-jax fit --out DIR writes DIR/params.json)")
-    if not os.path.isfile(path):
-        raise ExportError(f"params.json {path!r} is not a regular file")
-    size = os.path.getsize(path)
-    if size > MAX_RECORD_BYTES:
-        raise ExportError(f"params.json {path!r} has {size} bytes; a fit's record has a few KB "
-                          f"(limit {MAX_RECORD_BYTES})")
     try:
-        with open(path, encoding="utf-8") as fh:
-            rec = json.load(fh)
+        data = read_regular_file(path, MAX_RECORD_BYTES)  # no FIFO, device or huge file
+        rec = json.loads(data.decode("utf-8"))
+    except FileProblem as e:
+        raise ExportError(f"params.json {path!r}: {e.problem}") from None
     except UnicodeDecodeError as e:
         raise ExportError(f"params.json {path!r} is not UTF-8 text: {e}") from None
     except json.JSONDecodeError as e:
