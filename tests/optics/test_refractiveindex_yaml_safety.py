@@ -48,6 +48,9 @@ def alarm():
     def _expired(signum, frame):
         raise TimeoutError("parse_refractiveindex_yaml blocked for more than 10 s")
 
+    if not hasattr(signal, "SIGALRM"):  # not POSIX: no hard bound, the test still runs
+        yield
+        return
     old = signal.signal(signal.SIGALRM, _expired)
     signal.alarm(10)
     yield

@@ -1,7 +1,8 @@
 """Reading data files safely: regular files only, with a size limit checked before reading.
 
 Every loader of the package (measurement tables, MERL ``.binary`` files, refractiveindex.info
-YAML) reads its file through :func:`read_regular_file`, so that
+YAML) reads its file through :func:`read_regular_file` or :func:`open_regular_file`, and the
+table writers check their output with :func:`check_output_path`, so that
 
 - a FIFO, a socket or a device (``/dev/zero``) is rejected at once instead of blocking or
   reading forever: the path is checked with ``os.stat`` before it is opened, opened without
@@ -18,7 +19,7 @@ from __future__ import annotations
 import os
 import stat
 
-__all__ = ["FileProblem", "file_kind", "regular_file_size", "open_regular_file", "read_regular_file",
+__all__ = ["FileProblem", "file_kind", "open_regular_file", "read_regular_file",
            "check_output_path"]
 
 
@@ -37,7 +38,7 @@ def file_kind(mode: int) -> str:
                        (stat.S_ISBLK, "a block device"), (stat.S_ISREG, "a regular file")):
         if test(mode):
             return name
-    return "not a regular file"
+    return "an unknown kind of file"
 
 
 def _check(st: os.stat_result, max_bytes: int | None) -> int:
@@ -46,16 +47,6 @@ def _check(st: os.stat_result, max_bytes: int | None) -> int:
     if max_bytes is not None and st.st_size > max_bytes:
         raise FileProblem(f"file has {st.st_size} bytes, more than the limit of {max_bytes} bytes")
     return int(st.st_size)
-
-
-def regular_file_size(path, max_bytes: int | None = None) -> int:
-    """Size in bytes of the regular file ``path`` (symbolic links followed), without opening it.
-
-    Raises:
-        FileProblem: not a regular file, or larger than ``max_bytes``.
-        OSError: the file does not exist or cannot be examined (FileNotFoundError, ...).
-    """
-    return _check(os.stat(os.fspath(path)), max_bytes)
 
 
 def open_regular_file(path, max_bytes: int | None = None):

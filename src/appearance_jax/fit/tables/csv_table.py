@@ -208,8 +208,10 @@ def _read_lines(p: str, max_bytes: int) -> list[str]:
         raise TableError(f"{p}: {e.problem}{hint}") from None
     if data[:2] in (b"\xff\xfe", b"\xfe\xff"):
         raise err_at(p, 1, "UTF-16 text (a byte-order mark 0x" + data[:2].hex() + "); save the table as UTF-8")
+    if data.startswith(b"\xef\xbb\xbf"):  # the UTF-8 byte-order mark spreadsheets like to prepend
+        data = data[3:]
     try:
-        text = data.decode("utf-8-sig")  # -sig: spreadsheets like to prepend a BOM
+        text = data.decode("utf-8")
     except UnicodeDecodeError as e:
         line = len(_LINE_END.split(data[:e.start].decode("utf-8", "replace")))
         raise err_at(p, line, f"not UTF-8 text (byte 0x{data[e.start]:02x}); save the table as UTF-8") from None
