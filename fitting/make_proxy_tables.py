@@ -20,6 +20,10 @@ import numpy as np
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FABRICS = ("red-fabric", "white-fabric", "blue-fabric")
+# Glossy examples for the fit report (docs/report.md): a metal and a plastic whose mirror peak is
+# 4-5 decades above their diffuse part. MERL's nickel and specular-violet-phenolic have no proxy
+# (the Neural-BRDF release covers 78 of the 100 MERL materials); these are their nearest kin.
+GLOSSY = ("alum-bronze", "specular-blue-phenolic")
 
 
 def make(name: str, out_dir: str) -> str:
@@ -38,7 +42,7 @@ def make(name: str, out_dir: str) -> str:
 def main() -> int:
     out = os.path.join(ROOT, "data", "tables")
     os.makedirs(out, exist_ok=True)
-    for name in FABRICS:
+    for name in FABRICS + GLOSSY:
         print("wrote", make(name, out))
     return 0
 

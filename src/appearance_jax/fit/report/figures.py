@@ -9,27 +9,14 @@ import math
 
 import numpy as np
 
-from ...core.spectral import LUMINANCE_WEIGHTS, linear_to_srgb
+from ...core.spectral import LUMINANCE_WEIGHTS
 from ..solve.residuals import FLOOR
+from .geometry import cell_edges, eval_in_plane, grid_image, plane_points, raster_images, reciprocity_fill
 from ..tables.table import HORIZON_COS
-from .geometry import cell_edges, eval_in_plane, grid_image, plane_points, raster_images
 from .records import FIT, entry_status
+from .tonemap import log_tone, symmetric_limit
 
-__all__ = ["plot_maps", "plot_slices", "plot_scatter", "get_model"]
-
-
-def _srgb(linear):
-    x = np.clip(np.nan_to_num(np.asarray(linear, np.float64), nan=0.0), 0.0, 1.0)
-    return np.clip(np.asarray(linear_to_srgb(x), np.float64), 0.0, 1.0)
-
-
-def _exposure(fcos_rgb) -> float:
-    v = np.asarray(fcos_rgb, np.float64)
-    v = np.nanmax(np.where(np.isfinite(v), v, -np.inf), axis=-1) if v.size else v
-    v = v[np.isfinite(v) & (v > 0)]
-    if v.size == 0:
-        return 1.0
-    return float(1.0 / np.percentile(v, 99))
+__all__ = ["plot_maps", "maps_figure", "plot_slices", "slices_figure", "plot_scatter", "scatter_figure", "get_model"]
 
 
 def _log_err(fit_rgb, meas_rgb):
@@ -78,65 +65,110 @@ def _style_map_axes(ax, title):
 # figures
 
 
-def plot_maps(result, path, *, model=None) -> str:
-    """Write ``maps.png``; returns a one-line description of what was drawn (for params.json)."""
+def _save(fig, path, dpi) -> None:
+    fig.savefig(path, dpi=dpi)
+    _plt().close(fig)
+
+
+def _rgba(img):
+    """(..., 3) sRGB with NaN -> (..., 4) RGBA, transparent where there is no value."""
+    ok = np.isfinite(img).all(axis=-1, keepdims=True)
+    return np.concatenate([np.where(ok, img, 0.0), ok.astype(np.float64)], axis=-1)
+
+
+def _hatch(ax, xe, ye, filled_img):
+    """Hatch the cells of ``filled_img`` (n_y, n_x) > 0.5: values filled by reciprocity."""
+    f = np.nan_to_num(filled_img) > 0.5
+    if f.any():
+        pc = ax.pcolor(xe, ye, np.ma.masked_where(~f, f.astype(float)), hatch="////",
+                       edgecolor=(1, 1, 1, 0.45), linewidth=0.0)
+        pc.set_facecolor("none")
+        pc.set_gid("reciprocity_fill")
+
+
+def maps_figure(result, *, model=None, dpi=100):
+    """The figure of ``maps.png`` and its one-line description: measured, fitted and residual
+    theta_i x signed theta_o maps (see :mod:`~appearance_jax.fit.report`). Returns (Figure, str);
+    the caller saves and closes it (:func:`plot_maps` does both)."""
     plt = _plt()
     t = result.table
     f_data, _ = t.brdf()
     meas_rgb = t.linear_rgb(np.where(t.mask, f_data, np.nan))
     fit_rgb = t.linear_rgb(np.asarray(result.fitted, np.float64))
     p = plane_points(t, meas_rgb, fit_rgb)
-    if p.enough:
-        cos_o = np.cos(np.deg2rad(p.to))[:, None]
-        k = _exposure(p.meas * cos_o)
-        if p.regular:
-            ye, xe, m_img = grid_image(p, p.meas * cos_o)
-            _, _, f_img = grid_image(p, p.fit * cos_o)
-            _, _, e_img = grid_image(p, _log_err(p.fit, p.meas)[:, None])
-            how = "cells of the in-plane grid"
-        else:
-            ye, xe, m_img, f_img, e_img = raster_images(p, p.meas * cos_o, p.fit * cos_o,
-                                                         _log_err(p.fit, p.meas)[:, None])
-            how = "nearest in-plane sample (scattered points)"
-        which = ("all samples (in-plane table)" if t.is_in_plane else
-                 f"in-plane subset: {p.n_rows} of {t.n_samples} directions")
-        fig, axes = plt.subplots(1, 3, figsize=(17, 4.9), dpi=100, constrained_layout=True)
-        for ax, img, name in ((axes[0], m_img, "measured"), (axes[1], f_img, "fitted")):
-            ax.pcolormesh(xe, ye, _srgb(k * img), shading="flat")
-            _style_map_axes(ax, rf"{name}: sRGB of $f\cos\theta_o$ (exposure x{k:.3g})")
-        e = e_img[..., 0]
-        fin = np.abs(e[np.isfinite(e)])
-        lim = float(np.clip(np.percentile(fin, 99) if fin.size else 1.0, 0.05, 1.0))
-        cmap = plt.get_cmap("RdBu_r").with_extremes(bad="black")
-        im = axes[2].pcolormesh(xe, ye, np.ma.masked_invalid(e), cmap=cmap, vmin=-lim, vmax=lim, shading="flat")
-        _style_map_axes(axes[2], "log10(fitted / measured), luminance")
-        fig.colorbar(im, ax=axes[2], label=r"$\log_{10}$ ratio (+: model too bright)")
-        for ax in axes:
-            lo, hi = ax.get_xlim()
-            ax.plot([0, 90], [0, 90], color="white", lw=0.6, ls=":", alpha=0.5)  # mirror direction
-            ax.set_xlim(lo, hi)
-            ax.set_ylim(ye[0], ye[-1])
-        fig.suptitle(_title(result) + f"  [{which}; {how}]", fontsize=10)
-        desc = f"{which}; {how}; exposure {k:.4g} (99th percentile of measured f cos theta_o -> 1)"
+    if not p.enough:
+        return _model_only_maps(result, model, p, meas_rgb, dpi)
+    p = reciprocity_fill(p)
+    cos_o = np.cos(np.deg2rad(p.to))[:, None]
+    mc, fc, err = p.meas * cos_o, p.fit * cos_o, _log_err(p.fit, p.meas)[:, None]
+    tone = log_tone(mc)
+    if p.regular:
+        ye, xe, m_img = grid_image(p, mc)
+        f_img, e_img, h_img = (grid_image(p, v)[2] for v in (fc, err, p.filled[:, None] * 1.0))
+        how = "cells of the in-plane grid"
     else:
-        mdl = get_model(result, model)
-        tid = np.arange(0.0, 86.0, 1.0)
-        tod = np.arange(-89.0, 90.0, 1.0)
-        gi, go = np.meshgrid(tid, tod, indexing="ij")
-        f = eval_in_plane(mdl, result.params, np.deg2rad(gi.ravel()), np.deg2rad(go.ravel()), t.n_bands)
-        rgb = t.linear_rgb(f) * np.cos(np.deg2rad(go.ravel()))[:, None]
-        ok = t.mask.all(axis=1)
-        k = _exposure(meas_rgb[ok] * np.abs(np.cos(t.theta_o[ok]))[:, None])
-        fig, axes = plt.subplots(1, 2, figsize=(13, 4.9), dpi=100, constrained_layout=True,
-                                 gridspec_kw=dict(width_ratios=[1, 1.6]))
-        _scatter_axes(axes[0], t, result, lum=True)
-        axes[1].pcolormesh(cell_edges(tod), cell_edges(tid), _srgb(k * rgb.reshape(gi.shape + (3,))), shading="flat")
-        _style_map_axes(axes[1], rf"fitted model, dense in-plane: sRGB of $f\cos\theta_o$ (exposure x{k:.3g})")
-        fig.suptitle(_title(result) + "  [no in-plane samples to map: model rendered densely]", fontsize=10)
-        desc = (f"table has too few in-plane samples ({p.n_rows} directions): fitted model rendered densely "
-                f"in-plane, measured vs fitted scatter of all valid entries; exposure {k:.4g}")
-    fig.savefig(path)
-    plt.close(fig)
+        ye, xe, m_img, f_img, e_img, h_img = raster_images(p, mc, fc, err, p.filled[:, None] * 1.0)
+        how = "nearest in-plane sample (scattered points)"
+    which = ("all samples (in-plane table)" if t.is_in_plane else
+             f"in-plane subset: {p.n_rows} of {t.n_samples} directions")
+    fig, axes = plt.subplots(1, 3, figsize=(17, 5.2), dpi=dpi, constrained_layout=True)
+    for ax, img, name in ((axes[0], m_img, "measured"), (axes[1], f_img, "fitted")):
+        ax.pcolormesh(xe, ye, _rgba(tone(img)), shading="flat")
+        _hatch(ax, xe, ye, h_img[..., 0])
+        _style_map_axes(ax, rf"{name}: $f\cos\theta_o$, log-luminance brightness")
+    tone.colorbar(fig, list(axes[:2]), label=(r"luminance of $f\cos\theta_o$ [1/sr], log: "
+                                              f"{tone.lo:.2g} to {tone.hi:.3g} ({tone.decades:.1f} decades)"))
+    e = e_img[..., 0]
+    lim = symmetric_limit(e)
+    cmap = plt.get_cmap("RdBu_r").with_extremes(bad="black")
+    im = axes[2].pcolormesh(xe, ye, np.ma.masked_invalid(e), cmap=cmap, vmin=-lim, vmax=lim, shading="flat")
+    _hatch(axes[2], xe, ye, h_img[..., 0])
+    _style_map_axes(axes[2], rf"$\log_{{10}}$(fitted / measured) of luminance, limits $\pm${lim:g}")
+    fig.colorbar(im, ax=axes[2], extend="both",
+                 label=rf"$\log_{{10}}$ ratio (+: model too bright; $\pm${lim:g} = x{10 ** lim:.3g})")
+    for ax in axes:
+        lo, hi = ax.get_xlim()
+        ax.plot([0, 90], [0, 90], color="white", lw=0.8, ls=":", alpha=0.7, gid="mirror")
+        ax.set_xlim(lo, hi)
+        ax.set_ylim(ye[0], ye[-1])
+    axes[0].annotate(r"mirror $\theta_o=\theta_i$", (0.97, 0.03), xycoords="axes fraction", ha="right",
+                     va="bottom", fontsize=8, color="white")
+    fill = (f"; hatched: {int(p.filled.sum())} points filled by reciprocity f(i,o) = f(o,i)" if p.filled.any()
+            else "")
+    fig.suptitle(_title(result) + f"  [{which}; {how}]\nblack: no sample{fill}; "
+                 f"hue = colour, brightness = log10 luminance (same scale in both panels)", fontsize=10)
+    desc = f"{which}; {how}; {tone.describe()}; residual limits +-{lim:g} decades" + (
+        f"; {int(p.filled.sum())} points filled by reciprocity (hatched)" if p.filled.any() else "")
+    return fig, desc
+
+
+def _model_only_maps(result, model, p, meas_rgb, dpi):
+    plt = _plt()
+    t = result.table
+    mdl = get_model(result, model)
+    tid = np.arange(0.0, 86.0, 1.0)
+    tod = np.arange(-89.0, 90.0, 1.0)
+    gi, go = np.meshgrid(tid, tod, indexing="ij")
+    f = eval_in_plane(mdl, result.params, np.deg2rad(gi.ravel()), np.deg2rad(go.ravel()), t.n_bands)
+    rgb = t.linear_rgb(f) * np.cos(np.deg2rad(go.ravel()))[:, None]
+    tone = log_tone(rgb)
+    fig, axes = plt.subplots(1, 2, figsize=(13, 4.9), dpi=dpi, constrained_layout=True,
+                             gridspec_kw=dict(width_ratios=[1, 1.6]))
+    _scatter_axes(axes[0], t, result, lum=True)
+    axes[1].pcolormesh(cell_edges(tod), cell_edges(tid), _rgba(tone(rgb.reshape(gi.shape + (3,)))), shading="flat")
+    _style_map_axes(axes[1], r"fitted model, dense in-plane: $f\cos\theta_o$, log-luminance brightness")
+    tone.colorbar(fig, axes[1], label=(r"luminance of $f\cos\theta_o$ [1/sr], log: "
+                                       f"{tone.lo:.2g} to {tone.hi:.3g}"))
+    fig.suptitle(_title(result) + "  [no in-plane samples to map: model rendered densely]", fontsize=10)
+    desc = (f"table has too few in-plane samples ({p.n_rows} directions): fitted model rendered densely "
+            f"in-plane, measured vs fitted scatter of all valid entries; {tone.describe()}")
+    return fig, desc
+
+
+def plot_maps(result, path, *, model=None, dpi=100) -> str:
+    """Write ``maps.png`` (:func:`maps_figure`); returns its one-line description (for params.json)."""
+    fig, desc = maps_figure(result, model=model, dpi=dpi)
+    _save(fig, path, dpi)
     return desc
 
 
@@ -177,14 +209,18 @@ def _scatter_axes(ax, t, result, lum=False):
         ax.legend(fontsize=8, markerscale=3)
 
 
-def plot_scatter(result, path) -> None:
-    """Write ``scatter.png``: fitted vs measured BRDF per band, log-log."""
+def scatter_figure(result, *, dpi=100):
+    """The figure of ``scatter.png``: fitted against measured BRDF per band, log-log (a Figure)."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.6, 5.4), dpi=100, constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(5.6, 5.4), dpi=dpi, constrained_layout=True)
     _scatter_axes(ax, result.table, result)
     fig.suptitle(_title(result), fontsize=9)
-    fig.savefig(path)
-    plt.close(fig)
+    return fig
+
+
+def plot_scatter(result, path, *, dpi=100) -> None:
+    """Write ``scatter.png`` (:func:`scatter_figure`)."""
+    _save(scatter_figure(result, dpi=dpi), path, dpi)
 
 
 def _pick(values, n=4):
@@ -194,77 +230,110 @@ def _pick(values, n=4):
     return np.unique(v[np.round(np.linspace(0, v.size - 1, n)).astype(int)])
 
 
-def plot_slices(result, path, *, model=None) -> str:
-    """Write ``slices.png`` (polar f cos theta_o against signed theta_o); returns a description."""
+def _slice_targets(t, p):
+    """(theta_i values [deg], tolerance [deg] or None, description) of the slices."""
+    have = np.isfinite(p.meas).all(axis=1) if p.ti.size else np.zeros(0, bool)
+    if p.enough and p.regular:
+        return _pick(p.ti[have]), 1e-6, "measured in-plane samples"
+    if p.enough:  # scattered (MERL grid): round incidence angles with enough samples near them
+        tol = 2.5
+        near = [a for a in (0.0, 15.0, 30.0, 45.0, 60.0, 75.0) if (have & (np.abs(p.ti - a) <= tol)).sum() >= 5]
+        return (_pick(np.array(near)) if near else _pick(np.round(p.ti[have]))), tol, \
+            f"measured in-plane samples within {tol:g} deg of each theta_i"
+    above = np.cos(t.theta_i) > HORIZON_COS
+    targets = _pick(np.round(np.rad2deg(t.theta_i[above]), 1)) if above.any() else np.array([0.0, 30.0, 60.0])
+    return targets[targets < 89.0], None, "no in-plane samples: fitted model only"
+
+
+MODEL_DECADES = 4.0  # the y axis reaches this many decades below a slice's peak to show the model's tails
+POINT_DECADES = 8.0  # measured points further below the peak are drawn at the floor (open triangles)
+
+
+def _y_range(curve, pts):
+    """(floor, top) of a slice's log y axis: every positive measured point lies inside unless it is
+    more than POINT_DECADES below the top; the model is shown down to MODEL_DECADES below it."""
+    c = curve[np.isfinite(curve) & (curve > 0)]
+    q = pts[np.isfinite(pts) & (pts > 0)]
+    top = max(c.max() if c.size else 0.0, q.max() if q.size else 0.0)
+    if top <= 0:
+        return 1e-3, 1.0
+    floor = top * 10.0 ** -MODEL_DECADES
+    if c.size:
+        floor = max(floor, c.min())
+    if q.size:
+        floor = min(floor, q.min())
+    return max(floor, top * 10.0 ** -POINT_DECADES), top
+
+
+def slices_figure(result, *, model=None, dpi=100):
+    """The figure of ``slices.png`` and its description: f cos theta_o [1/sr] per channel on a log
+    axis against signed theta_o, one panel per theta_i (up to 4), measured in-plane points
+    (markers) and the fitted model evaluated densely in-plane (lines), the mirror direction
+    theta_o = theta_i and the retro direction theta_o = -theta_i marked. Returns (Figure, str)."""
     plt = _plt()
     t = result.table
     mdl = get_model(result, model)
     f_data, _ = t.brdf()
     meas_rgb = t.linear_rgb(np.where(t.mask, f_data, np.nan))
     p = plane_points(t, meas_rgb, t.linear_rgb(np.asarray(result.fitted, np.float64)))
-    have = np.isfinite(p.meas).all(axis=1) if p.ti.size else np.zeros(0, bool)
-    if p.enough and p.regular:
-        targets, tol = _pick(p.ti[have]), 1e-6
-    elif p.enough:  # scattered (MERL grid): round incidence angles with enough samples near them
-        tol = 2.5
-        near = [a for a in (0.0, 15.0, 30.0, 45.0, 60.0, 75.0) if (have & (np.abs(p.ti - a) <= tol)).sum() >= 5]
-        targets = _pick(np.array(near)) if near else _pick(np.round(p.ti[have]))
-    if p.enough:
-        desc = "measured in-plane samples" + ("" if p.regular else f" within {tol:g} deg of each theta_i")
-    else:
-        above = np.cos(t.theta_i) > HORIZON_COS
-        targets = _pick(np.round(np.rad2deg(t.theta_i[above]), 1)) if above.any() else np.array([0.0, 30.0, 60.0])
-        targets = targets[targets < 89.0]
-        tol = None
-        desc = "no in-plane samples: fitted model only"
-    tod = np.linspace(-89.0, 89.0, 357)
-    rgb_bands = t.spectral or t.n_bands == 3
-    chans = [("R", "tab:red", 0), ("G", "tab:green", 1), ("B", "tab:blue", 2)] if rgb_bands else [("f", "k", 0)]
+    targets, tol, desc = _slice_targets(t, p)
+    have = np.isfinite(p.meas).any(axis=1) if p.ti.size else np.zeros(0, bool)
+    tod = np.linspace(-89.5, 89.5, 359)
+    chans = ([("R", "tab:red", 0), ("G", "tab:green", 1), ("B", "tab:blue", 2)] if t.spectral or t.n_bands == 3
+             else [("f", "k", 0)])
     ncol = min(len(targets), 2) or 1
     nrow = int(math.ceil(len(targets) / ncol)) or 1
-    from matplotlib.ticker import MaxNLocator
-
-    # Polar axes keep a square box and draw the upper half disc in its middle half, so the
-    # boxes are placed by hand (overlapping) to pack the half discs tightly.
-    cw, side, ch, top, bottom = 5.2, 4.3, 3.0, 0.95, 0.45  # inches: cell width, box side, cell height
-    fig_w, fig_h = cw * ncol, ch * nrow + top + bottom
-    fig = plt.figure(figsize=(fig_w, fig_h), dpi=100)
-    for i, ti in enumerate(targets):
-        r, c = divmod(i, ncol)
-        y_base = bottom + (nrow - 1 - r) * ch + 0.55  # the wedge's flat edge (theta_o = +-90)
-        rect = [(c * cw + (cw - side) / 2) / fig_w, (y_base - side / 4) / fig_h, side / fig_w, side / fig_h]
-        ax = fig.add_axes(rect, projection="polar")
-        ax.set_theta_zero_location("N")
-        ax.set_theta_direction(-1)  # positive (forward) theta_o to the right, as on the maps
-        ax.set_thetamin(-90)
-        ax.set_thetamax(90)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(6.2 * ncol, 3.4 * nrow + 1.3), dpi=dpi, squeeze=False,
+                             constrained_layout=True)
+    n_low = 0
+    for ax, ti in zip(axes.ravel(), targets):
         f = eval_in_plane(mdl, result.params, np.full(tod.shape, np.deg2rad(ti)), np.deg2rad(tod), t.n_bands)
         curve = t.linear_rgb(f) * np.cos(np.deg2rad(tod))[:, None]
-        rmax = np.nanmax(curve) if np.isfinite(curve).any() else 1.0
-        if tol is not None:
-            sel = have & (np.abs(p.ti - ti) <= tol)
-            pts = p.meas[sel] * np.cos(np.deg2rad(p.to[sel]))[:, None]
-            if pts.size:
-                rmax = max(rmax, np.nanmax(pts))
+        sel = have & (np.abs(p.ti - ti) <= tol) if tol is not None else np.zeros(p.ti.shape, bool)
+        pts = p.meas[sel] * np.cos(np.deg2rad(p.to[sel]))[:, None]
+        used = [j for *_, j in chans]
+        floor, top = _y_range(curve[:, used], pts[:, used])
         for name, c, j in chans:
-            ax.plot(np.deg2rad(tod), curve[:, j], color=c, lw=1.3, label=f"model {name}" if i == 0 else None)
-            if tol is not None and pts.size:
-                ax.plot(np.deg2rad(p.to[sel]), pts[:, j], "o", ms=3, color=c, mfc="none",
-                        label=f"measured {name}" if i == 0 else None)
-        rmax = float(rmax) * 1.08 if np.isfinite(rmax) and rmax > 0 else 1.0
-        ax.set_rlim(0, rmax)
-        ax.yaxis.set_major_locator(MaxNLocator(3))
-        ax.tick_params(axis="y", labelsize=7)
-        ax.tick_params(axis="x", labelsize=8, pad=1)
-        ax.plot([np.deg2rad(-ti)] * 2, [0, rmax], color="0.4", lw=1, ls="--")  # the incident direction
-        ax.annotate(r"$\omega_i$", (np.deg2rad(-ti), rmax * 0.92), color="0.3", fontsize=9)
-        ax.annotate(rf"$\theta_i$ = {ti:g}°", (0.5, 0.75), xycoords="axes fraction", xytext=(0, 22),
-                    textcoords="offset points", ha="center", va="bottom", fontsize=10)
-        ax.annotate(r"$f\cos\theta_o$ [1/sr] against signed $\theta_o$", (0.5, 0.25), xycoords="axes fraction",
-                    xytext=(0, -16), textcoords="offset points", ha="center", va="top", fontsize=8)
-    fig.legend(loc="lower center", ncol=6, fontsize=8)
-    fig.suptitle(_title(result) + f"\n{desc}; retro side left, forward right", fontsize=10,
-                 y=1 - 0.08 / fig_h, va="top")
-    fig.savefig(path)
-    plt.close(fig)
+            ax.plot(tod, curve[:, j], color=c, lw=1.3, label=f"model {name}")
+            if pts.size:
+                y = pts[:, j]
+                ok = np.isfinite(y)
+                low = ok & (y < floor)
+                n_low += int(low.sum())
+                ax.plot(p.to[sel][ok & ~low], y[ok & ~low], "o", ms=3.5, color=c, mfc="none", ls="none",
+                        label=f"measured {name}")
+                if low.any():
+                    ax.plot(p.to[sel][low], np.full(low.sum(), floor), "v", ms=4, color=c, mfc="none", ls="none",
+                            label=f"measured {name} <= floor")
+        ax.set_yscale("log")
+        ax.set_ylim(floor / 1.4, top * 1.6)
+        ax.set_xlim(-90, 90)
+        ax.set_xticks(np.arange(-90, 91, 30))
+        ax.axvline(ti, color="0.25", lw=1.0, ls="--", gid="mirror", label=r"mirror $\theta_o=\theta_i$")
+        if ti > 0:
+            ax.axvline(-ti, color="0.55", lw=1.0, ls=":", gid="retro", label=r"retro $\theta_o=-\theta_i$")
+        ax.set_title(rf"$\theta_i$ = {ti:g}°", fontsize=10)
+        ax.set_xlabel(r"signed $\theta_o$ [deg]  (< 0: retro side, > 0: forward)", fontsize=9)
+        ax.set_ylabel(r"$f\cos\theta_o$ [1/sr] (log)", fontsize=9)
+        ax.grid(True, which="major", alpha=0.3)
+        ax.tick_params(labelsize=8)
+    for ax in axes.ravel()[len(targets):]:
+        ax.set_visible(False)
+    handles = {}
+    for ax in axes.ravel()[:len(targets)]:
+        for h, lab in zip(*ax.get_legend_handles_labels()):
+            handles.setdefault(lab, h)
+    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=min(len(handles), 6),
+               fontsize=8)
+    if n_low:
+        desc += f"; {n_low} values more than {POINT_DECADES:g} decades below the peak drawn at the floor"
+    fig.suptitle(_title(result) + f"\n{desc}; each panel: log axis from its peak down to the lowest measured "
+                 f"point (model to {MODEL_DECADES:g} decades below the peak)", fontsize=9)
+    return fig, desc
+
+
+def plot_slices(result, path, *, model=None, dpi=100) -> str:
+    """Write ``slices.png`` (:func:`slices_figure`); returns its description."""
+    fig, desc = slices_figure(result, model=model, dpi=dpi)
+    _save(fig, path, dpi)
     return desc

@@ -5,19 +5,22 @@ theta_i and the **signed** theta_o (:meth:`Table.signed_theta_o`, > 0 forward, <
 as in Fig. 4.4 of Padrón 2025. :func:`plane_points` averages repeated directions and decides
 how a map draws them: cells of a theta_i x theta_o grid, or nearest-sample pixels of scattered
 points (:func:`raster_images`). :func:`eval_in_plane` evaluates a model at in-plane directions
-(the report's dense curves and the ``appearance-jax eval`` grid).
+(the report's dense curves and the ``appearance-jax eval`` grid). :func:`reciprocity_fill`
+adds, by reciprocity f(wi, wo) = f(wo, wi), the in-plane points a table lacks but whose
+mirror (theta_i and theta_o swapped) it has: the wedge a MERL table stores only once.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ...core.model import estimate_of
 from ..tables.table import Table
 
-__all__ = ["eval_in_plane", "PlanePoints", "plane_points", "cell_edges", "grid_image", "raster_images"]
+__all__ = ["eval_in_plane", "PlanePoints", "plane_points", "reciprocity_fill", "cell_edges", "grid_image",
+           "raster_images"]
 
 
 def eval_in_plane(model, params, theta_i, theta_o, n_bands: int | None = None) -> np.ndarray:
@@ -42,7 +45,10 @@ def eval_in_plane(model, params, theta_i, theta_o, n_bands: int | None = None) -
 
 @dataclass
 class PlanePoints:
-    """De-duplicated in-plane points of a table: angles [deg] and linear-RGB f (not f cos)."""
+    """De-duplicated in-plane points of a table: angles [deg] and linear-RGB f (not f cos).
+
+    ``filled``: (M,) True for points added by :func:`reciprocity_fill` (not measured there).
+    """
 
     ti: np.ndarray
     to: np.ndarray
@@ -51,6 +57,11 @@ class PlanePoints:
     n_rows: int
     regular: bool
     enough: bool
+    filled: np.ndarray = field(default=None)
+
+    def __post_init__(self):
+        if self.filled is None:
+            self.filled = np.zeros(np.shape(self.ti), bool)
 
 
 def plane_points(t: Table, meas_rgb, fit_rgb) -> PlanePoints:
@@ -83,6 +94,62 @@ def plane_points(t: Table, meas_rgb, fit_rgb) -> PlanePoints:
     enough = bool(have.sum() >= 10 and np.unique(keys[have, 0]).size >= 2 and np.unique(keys[have, 1]).size >= 3)
     regular = len(keys) >= 0.5 * len(uti) * len(uto)
     return PlanePoints(keys[:, 0], keys[:, 1], meas, fit, int(rows.sum()), bool(regular), enough)
+
+
+def _key(ti, to):
+    return np.round(ti, 6) + 0.0, np.round(to, 6) + 0.0  # + 0.0: -0.0 -> 0.0
+
+
+def _mirrors(ti, to):
+    """Reciprocal partners (theta_i, signed theta_o) [deg] of in-plane points: swapping wi and wo
+    keeps the side (forward stays forward, retro stays retro), so (a, s b) -> (b, s a). theta_o = 0
+    has no side: both (0, a) and (0, -a) are its partner. Returns (which point, ti', to')."""
+    s = np.where(to < 0, -1.0, 1.0)
+    idx = np.arange(ti.size)
+    zero = to == 0
+    return (np.concatenate([idx, idx[zero]]), np.concatenate([np.abs(to), np.abs(to[zero])]),
+            np.concatenate([s * ti, -ti[zero]]))
+
+
+def reciprocity_fill(p: PlanePoints) -> PlanePoints:
+    """``p`` with the in-plane points it lacks but whose reciprocal partner it has measured, by
+    f(wi, wo) = f(wo, wi) (Helmholtz reciprocity): a point (theta_i = a, signed theta_o = s b) takes
+    the measured and fitted values of (b, s a). Added points have ``filled`` True.
+
+    A regular (grid) ``p`` gets the cells of its theta_i x theta_o grid that are absent or not
+    measured in every channel; a scattered one (MERL grid) gets the partner of every measured
+    point with no measured point within half a typical spacing (median nearest-neighbour
+    distance) of it (a MERL table stores each reciprocal pair once, so half the plane lies there).
+    """
+    have = np.isfinite(p.meas).all(axis=1)
+    if not have.any():
+        return p
+    src, mti, mto = _mirrors(p.ti[have], p.to[have])
+    src = np.flatnonzero(have)[src]
+    if p.regular:
+        uti, uto = np.unique(p.ti), np.unique(p.to)
+        measured = set(zip(*_key(p.ti[have], p.to[have])))
+        cells = set(zip(*_key(*[g.ravel() for g in np.meshgrid(uti, uto, indexing="ij")])))
+        take, seen = [], set()
+        for j, k in enumerate(zip(*_key(mti, mto))):
+            if k in cells and k not in measured and k not in seen:
+                seen.add(k)
+                take.append(j)
+        take = np.asarray(take, np.intp)
+        keep = ~np.array([k in seen for k in zip(*_key(p.ti, p.to))], bool)  # unmeasured cells now filled
+    else:
+        pts = np.stack([p.to[have], p.ti[have]], axis=1)
+        spacing, _ = _nearest(pts, pts, exclude_self=True)
+        spacing = float(np.median(spacing[np.isfinite(spacing)])) if np.isfinite(spacing).any() else 1.0
+        d, _ = _nearest(np.stack([mto, mti], axis=1), pts)
+        take = np.flatnonzero(d > 0.5 * spacing)
+        keep = np.ones(p.ti.size, bool)
+    if take.size == 0:
+        return p
+    s = src[take]
+    cat = lambda a, b: np.concatenate([a[keep], b])  # noqa: E731
+    return replace(p, ti=cat(p.ti, mti[take]), to=cat(p.to, mto[take]), meas=cat(p.meas, p.meas[s]),
+                   fit=cat(p.fit, p.fit[s]), filled=cat(p.filled, np.ones(take.size, bool)))
 
 
 def cell_edges(c):
