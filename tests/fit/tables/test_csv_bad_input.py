@@ -51,7 +51,8 @@ BAD = [
     (HEAD + SIG + "30,30,1,1,1,0.1,0_1,0.1\n", 4, re.escape("sigma_G = '0_1' is not a plain number")),
     (HEAD + FULL + "30deg,0,30,180,1,1,1\n", 4, re.escape("theta_i = '30deg' is not a plain number (unit or text "
                                                           "'deg' after 30?")),
-    (HEAD + FULL + "30,0,45 °,180,1,1,1\n", 4, re.escape("theta_o = '45 °' is not a plain number (unit or text '°'")),
+    (HEAD + FULL + "30,0,45 °,180,1,1,1\n", 4,
+     re.escape("theta_o = '45 °' is not a plain number (unit or text '°'")),
     (HEAD + FULL + "30,0,30,180,0.5 1/sr,1,1\n", 4, re.escape("R = '0.5 1/sr' is not a number")),
     (HEAD + FULL + "30,0,30,180,12%,1,1\n", 4, re.escape("R = '12%' is not a plain number (unit or text '%'")),
     (HEAD + FULL + "30,0,30,180,1,\u0661\u0660,1\n", 4, "G = '.*' is not a plain number \\(write ASCII digits"),
@@ -75,7 +76,8 @@ BAD = [
      re.escape("theta_o = 95 is outside [0, 90] degrees")),
     (HEAD + "\r\n" + FULL + "\r30,0,30,180,1,x,1\n", 6, re.escape("G = 'x' is not a number")),
     (HEAD + FULL + "30,0,30,180,1,1,1\n\0\0\0", 5, "NUL character: a binary file, not CSV text"),
-    ("# quantity: brdf\n".encode("utf-16"), 1, re.escape("UTF-16 text (a byte-order mark 0xfffe); save the table as UTF-8")),
+    ("# quantity: brdf\n".encode("utf-16"), 1,
+     re.escape("UTF-16 text (a byte-order mark 0xfffe); save the table as UTF-8")),
     (HEAD.encode() + b"\r# sample: \xe9chantillon\r" + FULL.encode(), 4, re.escape("not UTF-8 text (byte 0xe9)")),
     (b"\xef\xbb\xbf" + HEAD.encode() + b"# \xff\n", 3, re.escape("not UTF-8 text (byte 0xff)")),  # after a BOM
 ]
