@@ -51,7 +51,7 @@ def _short(text, n=70):
 
 def _title(result) -> str:
     return (f"{result.model} fit ({result.metric} metric, {result.solver}): loss {result.loss:.3g}, "
-            f"{result.n_valid} values\n{_short(result.table.source, 90)}")
+            f"{result.n_valid} values\n{_short(result.table.source, 130)}")
 
 
 def _style_map_axes(ax, title):
@@ -80,7 +80,7 @@ def _hatch(ax, xe, ye, filled_img):
     """Hatch the cells of ``filled_img`` (n_y, n_x) > 0.5: values filled by reciprocity."""
     f = np.nan_to_num(filled_img) > 0.5
     if f.any():
-        pc = ax.pcolor(xe, ye, np.ma.masked_where(~f, f.astype(float)), hatch="////",
+        pc = ax.pcolor(xe, ye, np.ma.masked_where(~f, f.astype(float)), hatch="//",
                        edgecolor=(1, 1, 1, 0.45), linewidth=0.0)
         pc.set_facecolor("none")
         pc.set_gid("reciprocity_fill")
@@ -277,6 +277,10 @@ def slices_figure(result, *, model=None, dpi=100):
     meas_rgb = t.linear_rgb(np.where(t.mask, f_data, np.nan))
     p = plane_points(t, meas_rgb, t.linear_rgb(np.asarray(result.fitted, np.float64)))
     targets, tol, desc = _slice_targets(t, p)
+    if p.enough:
+        p = reciprocity_fill(p)
+        if p.filled.any():
+            desc += f"; squares: {int(p.filled.sum())} points filled by reciprocity f(i,o) = f(o,i)"
     have = np.isfinite(p.meas).any(axis=1) if p.ti.size else np.zeros(0, bool)
     tod = np.linspace(-89.5, 89.5, 359)
     chans = ([("R", "tab:red", 0), ("G", "tab:green", 1), ("B", "tab:blue", 2)] if t.spectral or t.n_bands == 3
@@ -295,16 +299,17 @@ def slices_figure(result, *, model=None, dpi=100):
         floor, top = _y_range(curve[:, used], pts[:, used])
         for name, c, j in chans:
             ax.plot(tod, curve[:, j], color=c, lw=1.3, label=f"model {name}")
-            if pts.size:
+            for part, marker, what in ((~p.filled[sel], "o", "measured"), (p.filled[sel], "s", "by reciprocity")):
                 y = pts[:, j]
-                ok = np.isfinite(y)
+                ok = np.isfinite(y) & part
                 low = ok & (y < floor)
                 n_low += int(low.sum())
-                ax.plot(p.to[sel][ok & ~low], y[ok & ~low], "o", ms=3.5, color=c, mfc="none", ls="none",
-                        label=f"measured {name}")
+                if (ok & ~low).any():
+                    ax.plot(p.to[sel][ok & ~low], y[ok & ~low], marker, ms=3.5 if marker == "o" else 3, color=c,
+                            mfc="none", ls="none", alpha=1.0 if marker == "o" else 0.6, label=f"{what} {name}")
                 if low.any():
                     ax.plot(p.to[sel][low], np.full(low.sum(), floor), "v", ms=4, color=c, mfc="none", ls="none",
-                            label=f"measured {name} <= floor")
+                            label=f"{what} {name} <= floor")
         ax.set_yscale("log")
         ax.set_ylim(floor / 1.4, top * 1.6)
         ax.set_xlim(-90, 90)
@@ -323,12 +328,13 @@ def slices_figure(result, *, model=None, dpi=100):
     for ax in axes.ravel()[:len(targets)]:
         for h, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, h)
-    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=min(len(handles), 6),
-               fontsize=8)
+    per_channel = max(sum(lab.endswith(f" {chans[0][0]}") for lab in handles), 1)  # one legend column per channel
+    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", fontsize=8,
+               ncol=int(math.ceil(len(handles) / per_channel)))
     if n_low:
         desc += f"; {n_low} values more than {POINT_DECADES:g} decades below the peak drawn at the floor"
-    fig.suptitle(_title(result) + f"\n{desc}; each panel: log axis from its peak down to the lowest measured "
-                 f"point (model to {MODEL_DECADES:g} decades below the peak)", fontsize=9)
+    fig.suptitle(_title(result) + f"\n{desc}\neach panel: log axis from its peak down to its lowest measured "
+                 f"point (the model down to {MODEL_DECADES:g} decades below the peak)", fontsize=9)
     return fig, desc
 
 
