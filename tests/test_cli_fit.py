@@ -1,4 +1,4 @@
-"""The fit and eval --table commands of the command line."""
+"""The fit and eval commands of the command line: reports, plumbing, errors, the eval -> fit round trip."""
 
 import json
 
@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from appearance_jax import registry
-from appearance_jax.cli import _parse_fix, main
+from appearance_jax.cli import EXIT_NOT_CONVERGED, main
+from appearance_jax.cli.checks import parse_fix
 from appearance_jax.fit.tables.csv_table import read_csv, write_csv
 from appearance_jax.fit.tables.table import Table
 
@@ -42,15 +43,17 @@ def test_fit_writes_report_and_recovers_reflectance(lambert_csv, tmp_path, capsy
     assert "compiling" in text and "step" in text and "loss" in text  # progress
     assert "reflectance[R]" in text and "converged" in text  # result.summary()
     assert str(out / "maps.png") in text  # the files written
+    assert text.strip().splitlines()[-1] == f"status: converged in {d['iterations']} steps (exit 0)"
+    assert d["exit"] == {"code": 0, "status": "converged"} and d["fixed_by"] == {}
     assert jax.config.jax_enable_x64  # left as the tests set it
 
 
 def test_parse_fix():
-    assert _parse_fix(["eta=1.5", "k", "specular_reflectance=0.9,0.8,0.7"]) == {
+    assert parse_fix(["eta=1.5", "k", "specular_reflectance=0.9,0.8,0.7"]) == {
         "eta": 1.5, "k": None, "specular_reflectance": (0.9, 0.8, 0.7)}
-    assert _parse_fix(None) == {}
+    assert parse_fix(None) == {}
     with pytest.raises(ValueError, match="--fix"):
-        _parse_fix(["=3"])
+        parse_fix(["=3"])
 
 
 def test_fit_options_reach_the_fitter(lambert_csv, tmp_path, monkeypatch):
@@ -154,6 +157,36 @@ def test_eval_on_table_errors(tmp_path, capsys):
 def test_eval_grid_mode_unchanged(tmp_path, capsys):
     assert main(["eval", "--model", "lambert", "--theta-i", "0,45", "--theta-o=-80:80:40", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "lambert.csv").is_file() and (tmp_path / "lambert.png").is_file()
-    assert "(10 rows)" in capsys.readouterr().out
+    assert "(10 rows" in capsys.readouterr().out
     assert main(["eval", "--model", "lambert", "--theta-i", "100", "--out", str(tmp_path)]) == 2
-    assert "[-90, 90]" in _err(capsys)
+    assert "--theta-i 100: angles must lie in [0, 90]" in _err(capsys)
+
+
+def test_eval_csv_round_trips_through_fit(tmp_path, capsys):
+    """eval writes the table format fit reads: fitting its CSV recovers the parameters."""
+    rho = (0.3, 0.2, 0.1)
+    assert main(["eval", "--model", "lambert", "--param", "reflectance=" + ",".join(map(str, rho)),
+                 "--theta-i", "0,30,60", "--theta-o=-80:80:20", "--out", str(tmp_path)]) == 0
+    csv = tmp_path / "lambert.csv"
+    back = read_csv(csv)
+    assert back.quantity == "brdf" and back.bands == ("R", "G", "B") and back.is_in_plane
+    assert main(["fit", str(csv), "--model", "lambert", "--no-plots", "--quiet", "--out", str(tmp_path / "fit")]) == 0
+    d = json.loads((tmp_path / "fit" / "params.json").read_text())
+    np.testing.assert_allclose([d["parameters"][f"reflectance[{b}]"]["value"] for b in "RGB"], rho, rtol=1e-8)
+
+
+def test_eval_grid_of_a_one_band_model_is_written_as_grey_rgb(tmp_path):
+    assert main(["eval", "--model", "lambert", "--theta-i", "30", "--theta-o", "0,40", "--out", str(tmp_path)]) == 0
+    t = read_csv(tmp_path / "lambert.csv")
+    np.testing.assert_allclose(t.values, 0.5 / np.pi, rtol=1e-8)  # default reflectance 0.5 in every band
+    assert t.values.shape == (2, 3)
+
+
+def test_fit_that_does_not_converge_exits_3_and_says_so_last(lambert_csv, tmp_path, capsys):
+    out = tmp_path / "fit"
+    code = main(["fit", lambert_csv, "--model", "lambert", "--max-steps", "1", "--no-plots", "--out", str(out)])
+    assert code == EXIT_NOT_CONVERGED == 3
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("status: NOT converged") and "--max-steps 1" in last and last.endswith("(exit 3)")
+    d = json.loads((out / "params.json").read_text())
+    assert d["converged"] is False and d["exit"] == {"code": 3, "status": "not converged"}

@@ -26,3 +26,12 @@ def test_nested_tuple_defaults_are_printed(capsys):
     out = capsys.readouterr().out
     line = next(L for L in out.splitlines() if L.strip().startswith("offsets"))
     assert "((" in line  # per-family tuples of tangent offsets
+
+
+def test_models_name_shows_the_parameters_fit_holds_fixed(capsys):
+    assert main(["models", "rough_plastic"]) == 0
+    out = capsys.readouterr().out
+    value, why = registry.get("rough_plastic").fit_fixed["eta"]
+    assert f"held fixed by `fit` unless --free NAME: eta = {value:g} ({why})" in out
+    assert main(["models", "lambert"]) == 0
+    assert "held fixed" not in capsys.readouterr().out

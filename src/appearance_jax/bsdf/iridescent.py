@@ -190,5 +190,6 @@ MODEL = Model(
     summary="Microfacet thin-film BRDF (Cook-Torrance with Airy film reflectance; rgb3/CIE/spectral)",
     source="Belcour & Barla 2017; Padrón Griffé 2025 Fig. 3.6(c)",
     reciprocal=True,
+    fit_fixed={"eta_outside": (1.0, "the incidence medium is air")},
     presets=PRESETS,
 )

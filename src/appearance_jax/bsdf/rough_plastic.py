@@ -226,6 +226,8 @@ MODEL = Model(
     summary="rough dielectric coat over a diffuse base (Mitsuba 3 roughplastic)",
     source="Weidlich & Wilkie 2007; Walter et al. 2007; Jakob, Mitsuba roughplastic",
     reciprocal=True,
+    # a free coat index trades against specular_reflectance and the base albedo (fabrics drift to 2.1-2.5)
+    fit_fixed={"eta": (1.5, "coat index of common polymers and varnishes, 1.45-1.6")},
     presets={
         "white_plastic": Params(),
         "mitsuba_default": Params(

@@ -247,6 +247,9 @@ MODEL = Model(
     summary="snake skin: smooth Airy thin film over an absorbing diffuse layer (Nyström-solved, non-delta part)",
     source="Padrón Griffé 2025, Ch. 3 (Padrón-Griffé et al. CEIG 2023)",
     reciprocal=True,
+    fit_fixed={"eta0": (1.0, "the top medium is air"),
+               "eta1": (1.56, "the film is keratin (Padrón Sec. 3.5.2; Table 3.1 prints 1.53)"),
+               "depth": (2.0, "only the optical depth sigma_a * depth enters; sigma_a carries it")},
     presets=PRESETS,
 )
 
