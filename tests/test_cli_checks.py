@@ -145,3 +145,26 @@ def test_a_sum_holds_its_components_known_parameters(spy):
     assert spy["fix"] == {"eta": 1.5}
     main(["fit", TABLE, "--model", "rough_plastic+rough_plastic", "--out", "unused"])
     assert spy["fix"] == {"eta": 1.5, "rough_plastic_1_eta": 1.5}  # the renamed field of the second lobe
+
+
+def test_bootstrap_option(spy, capsys):
+    from appearance_jax.cli.fit_cmd import _fit_accepts
+
+    if not _fit_accepts("bootstrap"):
+        pytest.skip("fit() has no bootstrap keyword: the CLI leaves --bootstrap out")
+    assert main(["fit", TABLE, "--model", "lambert", "--bootstrap", "1"]) == EXIT_USAGE
+    assert "--bootstrap 1: must be 0 or an integer >= 2" in _err(capsys)
+    main(["fit", TABLE, "--model", "lambert", "--out", "unused", "--bootstrap", "8", "--seed", "3"])
+    assert spy["bootstrap"] == 8 and spy.get("bootstrap_seed", 3) == 3
+
+
+def test_warnings_come_from_the_result_or_from_parameters_at_bounds():
+    from types import SimpleNamespace
+
+    from appearance_jax.cli.fit_cmd import _warnings
+
+    assert _warnings(SimpleNamespace(warnings=["a", "b"], at_bound=())) == ["a", "b"]
+    old = SimpleNamespace(at_bound=("eta", "diffuse_reflectance[G]"))  # a result without .warnings
+    (w,) = _warnings(old)
+    assert w.startswith("2 parameters ended at a bound (eta, diffuse_reflectance[G])")
+    assert _warnings(SimpleNamespace(at_bound=("eta",))) == []

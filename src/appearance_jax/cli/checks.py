@@ -36,10 +36,12 @@ class UsageError(ValueError):
 
 
 # ------------------------------------------------------------------------- numbers, folders
-def count(option: str, value, lo: int = 1) -> int:
-    """An integer option ``>= lo``."""
+def count(option: str, value, lo: int = 1, zero: bool = False) -> int:
+    """An integer option ``>= lo`` (or 0 with ``zero``)."""
+    if zero and value == 0 and not isinstance(value, bool):
+        return 0
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
-        raise UsageError(f"{option} {value}: must be an integer >= {lo}")
+        raise UsageError(f"{option} {value}: must be " + ("0 or " if zero else "") + f"an integer >= {lo}")
     return int(value)
 
 

@@ -47,7 +47,7 @@ def add_parser(subparsers) -> None:
     p.add_argument("--solver", choices=SOLVERS, default="lm", help="solver (default lm, Levenberg-Marquardt)")
     p.add_argument("--starts", type=int, default=1, metavar="N",
                    help="number of starts, >= 1 (> 1 adds random starts; default 1)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random starts, >= 0 (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random starts and of --bootstrap, >= 0 (default 0)")
     p.add_argument("--max-theta", default="85", metavar="DEG",
                    help="mask samples with theta_i or theta_o above DEG, in (0, 90] (default 85; 'none' keeps all)")
     p.add_argument("--stride", type=int, default=None, metavar="S",
@@ -55,7 +55,8 @@ def add_parser(subparsers) -> None:
     p.add_argument("--max-steps", type=int, default=400, metavar="N", help="solver step limit, >= 1 (default 400)")
     if _fit_accepts("bootstrap"):
         p.add_argument("--bootstrap", type=int, default=0, metavar="B",
-                       help="bootstrap resamples for the uncertainties, >= 0 (default 0: none)")
+                       help="block-bootstrap refits over incidence directions for an honest sigma, 0 (none, "
+                            "default) or >= 2 (64 is a good start; seeded by --seed)")
     p.add_argument("--ignore-sigma", action="store_true", help="do not weight by the table's uncertainties")
     p.add_argument("--float32", action="store_true", help="fit in float32 (default: float64)")
     p.add_argument("--progress-every", type=int, default=10, metavar="K",
@@ -75,7 +76,7 @@ def check(args) -> dict:
     checks.count("--seed", args.seed, 0)
     checks.count("--progress-every", args.progress_every, 0)
     if getattr(args, "bootstrap", None) is not None:
-        checks.count("--bootstrap", args.bootstrap, 0)
+        checks.count("--bootstrap", args.bootstrap, 2, zero=True)
     max_theta = checks.max_theta(args.max_theta)
     checks.stride(args.stride)
     checks.out_folder("--out", args.out)
@@ -96,6 +97,8 @@ def check(args) -> dict:
               verbose=0 if args.quiet else args.progress_every)
     if getattr(args, "bootstrap", 0):
         kw["bootstrap"] = args.bootstrap
+        if _fit_accepts("bootstrap_seed"):
+            kw["bootstrap_seed"] = args.seed
     return dict(model=model, kw=kw, origin=origin)
 
 
