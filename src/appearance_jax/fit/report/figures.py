@@ -97,7 +97,7 @@ def maps_figure(result, *, model=None, dpi=100):
     fit_rgb = t.linear_rgb(np.asarray(result.fitted, np.float64))
     p = plane_points(t, meas_rgb, fit_rgb)
     if not p.enough:
-        return _model_only_maps(result, model, p, meas_rgb, dpi)
+        return _model_only_maps(result, model, p, dpi)
     p = reciprocity_fill(p)
     cos_o = np.cos(np.deg2rad(p.to))[:, None]
     mc, fc, err = p.meas * cos_o, p.fit * cos_o, _log_err(p.fit, p.meas)[:, None]
@@ -142,7 +142,7 @@ def maps_figure(result, *, model=None, dpi=100):
     return fig, desc
 
 
-def _model_only_maps(result, model, p, meas_rgb, dpi):
+def _model_only_maps(result, model, p, dpi):
     plt = _plt()
     t = result.table
     mdl = get_model(result, model)
