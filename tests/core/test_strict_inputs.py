@@ -166,11 +166,35 @@ def test_fit_rejects_out_of_range_fixed_and_start_values_eagerly():
 
 
 def test_fitted_parameters_stay_inside_their_declared_ranges():
-    from appearance_jax.fit.solve.transforms import ParamSpace
+    from appearance_jax.fit.solve.transforms import ParamSpace, _forward
     sp = ParamSpace(rc.Params(), 3, fix=["eta", "k"])
-    z = jnp.linspace(-50.0, 50.0, sp.size * 7).reshape(7, sp.size)
-    for zi in z:
-        validate(sp.params_from_z(zi).replace())  # replace(): a constructed, checked Params
+    for zi in jnp.linspace(-50.0, 50.0, sp.size * 7).reshape(7, sp.size):
+        sp.params_from_z(zi)  # built eagerly: construction checks every value
+    # an open bound is never reached, not even where sin z = -1 or exp(z) underflows to 0
+    for spec, z in ((ParamSpec(0.0, 90.0, lo_open=True), -np.pi / 2), (ParamSpec(1.0, lo_open=True), -500.0),
+                    (ParamSpec(hi=1.0, hi_open=True), 500.0), (ParamSpec(-1.0, 1.0, True, True), np.pi / 2)):
+        x = _forward(spec, jnp.asarray(z, jnp.float32))
+        assert spec.lo < float(x) < spec.hi
+
+
+def test_values_are_compared_in_their_own_precision():
+    cosmetics = registry.get("cosmetics")  # theta in [0, pi/2]: float32(pi/2) > pi/2 in float64
+    cosmetics.Params(theta=np.float32(np.pi / 2))
+    with pytest.raises(ValueError, match=r"alpha = 2\.00000024 is outside the valid range \[0\.001, 2\]"):
+        rc.Params(alpha=np.nextafter(np.float32(2.0), np.float32(3.0)))
+
+
+def test_replace_copy_and_pickle_keep_the_checks():
+    import copy
+    import pickle
+    p = rc.Params(alpha=0.3)
+    assert np.array_equal(np.asarray(copy.deepcopy(p).eta), np.asarray(p.eta))
+    q = pickle.loads(pickle.dumps(p))
+    assert float(q.alpha) == pytest.approx(0.3)
+    rebuilt = jax.tree.map(lambda x: -x, p)  # unchecked: replace() checks every field again
+    with pytest.raises(ValueError, match=r"\.eta = -0\.155\d* is outside"):
+        rebuilt.replace(alpha=0.2)
+    assert float(p.replace(alpha=0.5).alpha) == pytest.approx(0.5)
 
 
 # ----------------------------------------------------------------------------------------
@@ -228,6 +252,16 @@ def test_nearly_unit_grazing_and_below_horizon_directions_are_valid():
     for w in (vec3(1.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0), vec3(0.6, 0.0, -0.8)):
         assert np.all(np.asarray(rc.eval(p, w, W)) == 0.0)
         assert np.all(np.asarray(rc.eval(p, W, w)) == 0.0)
+
+
+def test_large_direction_arrays_are_checked_on_the_device_and_the_bad_entry_is_named():
+    n = 20_000
+    z = np.ones(n)
+    z[12_345] = 1.01
+    good = rc.eval(rc.Params(), vec3(jnp.zeros(n), jnp.zeros(n), jnp.ones(n)), W)
+    assert good.shape == (n, 3)
+    with pytest.raises(ValueError, match=r"wo = \(0, 0, 1\.01\) at index \(12345,\) is not a unit vector"):
+        rc.eval(rc.Params(), W, vec3(jnp.zeros(n), jnp.zeros(n), jnp.asarray(z)))
 
 
 def test_traced_directions_are_not_checked():

@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 
 from .params import validate
-from .vec import as_direction
+from .vec import as_direction, check_directions
 
 #: kernel arguments that are directions (checked by :func:`boundary`)
 DIRECTION_ARGS = ("wi", "wo")
@@ -62,13 +62,14 @@ def boundary(kernel: Callable, params_cls: type, static_argnames: tuple[str, ...
     def public(params, *args, **kwargs):
         validate(params, params_cls)
         if directions:
-            args = list(args)
+            args, named = list(args), {}
             for n, i in directions:
                 if i < len(args):
                     if args[i] is not None:
-                        args[i] = as_direction(n, args[i])
+                        args[i] = named[n] = as_direction(n, args[i], check=False)
                 elif kwargs.get(n) is not None:
-                    kwargs[n] = as_direction(n, kwargs[n])
+                    kwargs[n] = named[n] = as_direction(n, kwargs[n], check=False)
+            check_directions(named)
         return jitted(params, *args, **kwargs)
 
     public.kernel = kernel  # the unvalidated, unjitted kernel, for composition

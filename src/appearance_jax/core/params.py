@@ -34,6 +34,7 @@ checks of the same ranges, and :func:`checked` wraps a function so that they are
 
 from __future__ import annotations
 
+import contextvars
 import dataclasses
 import functools
 import math
@@ -132,16 +133,20 @@ _EXPECTED = "a real number, a sequence of real numbers or a real array"
 
 
 def _host_value(label: str, v):
-    """A concrete field value as a float numpy array, or None when it cannot be checked
-    eagerly (None, tracers, abstract values such as ``jax.ShapeDtypeStruct``).
-    Raises ``ValueError`` naming ``label`` and the expected type for a non-number."""
+    """A concrete field value as a numpy array (floating arrays keep their precision, which
+    :func:`_check_array` compares in), or None when it cannot be checked eagerly (None,
+    tracers, abstract values such as ``jax.ShapeDtypeStruct``). Raises ``ValueError`` naming
+    ``label`` and the expected type for a non-number."""
     if v is None or _is_traced(v):
         return None
-    if isinstance(v, jax.Array):
-        if not (jnp.issubdtype(v.dtype, jnp.floating) or jnp.issubdtype(v.dtype, jnp.integer)
-                or v.dtype == jnp.bool_):
+    if isinstance(v, (jax.Array, np.ndarray, np.generic)) and v.dtype.kind in "fc":
+        if v.dtype.kind == "c":
             raise ValueError(f"{label} has dtype {v.dtype}: expected {_EXPECTED}")
-        return np.asarray(v, dtype=float)
+        return np.asarray(v)
+    if isinstance(v, jax.Array):
+        if v.dtype.kind not in "biu" and not jnp.issubdtype(v.dtype, jnp.floating):
+            raise ValueError(f"{label} has dtype {v.dtype}: expected {_EXPECTED}")
+        return np.asarray(v, dtype=float)  # (bfloat16, kind "V", too)
     if isinstance(v, (tuple, list)) or isinstance(v, _HOST_NUMERIC):
         try:
             a = np.asarray(v, dtype=float)
@@ -155,11 +160,14 @@ def _host_value(label: str, v):
     raise ValueError(f"{label} = {v!r} is not numeric ({type(v).__name__}): expected {_EXPECTED}")
 
 
-def _check_bands(label: str, values: dict[str, np.ndarray]) -> None:
-    """Band fields (name -> concrete value) must agree on their trailing length (1 broadcasts)."""
+def _n_bands(shape: tuple) -> int:
+    return shape[-1] if shape else 1
+
+
+def _check_bands(label: str, lengths: dict[str, int]) -> None:
+    """Band fields (name -> trailing length) must agree on their length (1 broadcasts)."""
     first = None
-    for name, a in values.items():
-        n = a.shape[-1] if a.ndim else 1
+    for name, n in lengths.items():
         if n == 1:
             continue
         if first is None:
@@ -168,6 +176,31 @@ def _check_bands(label: str, values: dict[str, np.ndarray]) -> None:
             raise ValueError(
                 f"{label}.{name} has {n} bands (trailing axis) but {label}.{first[0]} has {first[1]}: "
                 "band fields must have the same number of bands, or 1 (a scalar broadcasts to every band)")
+
+
+_PY_REAL = (float, int)
+
+
+def _fast_length(v, spec: ParamSpec) -> int | None:
+    """Trailing length of a python number or flat sequence of numbers that is finite and in
+    range (checked without numpy: construction from literals stays cheap); None otherwise
+    (then the numpy path checks, or raises with the message)."""
+    t = type(v)
+    if t in _PY_REAL:
+        vals, n = (v,), 1
+    elif (t is tuple or t is list) and v and all(type(c) in _PY_REAL for c in v):
+        vals, n = v, len(v)
+    else:
+        return None
+    return n if all(_in_range(c, spec) for c in vals) else None
+
+
+def _in_range(c: float, spec: ParamSpec, lo=None, hi=None) -> bool:
+    """Finite and inside the spec's range (a NaN is neither); ``lo``/``hi``: the bounds rounded
+    to the value's precision (default: the declared ones)."""
+    lo = spec.lo if lo is None else lo
+    hi = spec.hi if hi is None else hi
+    return math.isfinite(c) and (c > lo if spec.lo_open else c >= lo) and (c < hi if spec.hi_open else c <= hi)
 
 
 def owner_name(cls) -> str:
@@ -196,6 +229,7 @@ def params_class(cls):
         label = _label(klass)
         specs = klass.__dataclass_fields__
         concrete, bands = True, {}
+        trusted = _TRUSTED.get()
         for name in klass._data_fields:
             v = getattr(self, name)
             spec = specs[name].metadata.get(_META_KEY)
@@ -203,13 +237,16 @@ def params_class(cls):
                 concrete = concrete and (v is None or getattr(v, _CHECKED, False))
                 object.__setattr__(self, name, _to_array(v))
                 continue
-            a = _host_value(f"{label}.{name}", v)
-            if a is None:
-                concrete = concrete and v is None
-            else:
-                _check_array(f"{label}.{name}", a, spec)
-                if spec.bands:
-                    bands[name] = a
+            n = _n_bands(np.shape(v)) if id(v) in trusted else _fast_length(v, spec)
+            if n is None:
+                a = _host_value(f"{label}.{name}", v)
+                if a is None:
+                    concrete = concrete and v is None
+                else:
+                    _check_array(f"{label}.{name}", a, spec)
+                    n = _n_bands(a.shape)
+            if spec.bands and n is not None:
+                bands[name] = n
             object.__setattr__(self, name, _to_array(v))
         _check_bands(label, bands)
         for name in klass._static_fields:
@@ -242,9 +279,25 @@ def params_class(cls):
         (meta if isinstance(spec, StaticSpec) else data).append(f.name)
     dc._data_fields = tuple(data)
     dc._static_fields = tuple(meta)
-    dc.replace = lambda self, **kw: dataclasses.replace(self, **kw)
+    dc.replace = _replace
     _register(dc, tuple(data), tuple(meta))
     return dc
+
+
+# ids of field values that an in-progress replace() carries over from a checked Params
+_TRUSTED: contextvars.ContextVar[frozenset] = contextvars.ContextVar("appearance_jax_trusted", default=frozenset())
+
+
+def _replace(self, **kw):
+    """A copy with some fields changed (``dataclasses.replace``), checked like a construction;
+    the values carried over from an already checked ``self`` are not checked again."""
+    if not getattr(self, _CHECKED, False):
+        return dataclasses.replace(self, **kw)
+    token = _TRUSTED.set(frozenset(id(getattr(self, n)) for n in type(self)._data_fields if n not in kw))
+    try:
+        return dataclasses.replace(self, **kw)
+    finally:
+        _TRUSTED.reset(token)
 
 
 def _register(dc, data: tuple, meta: tuple) -> None:
@@ -306,7 +359,7 @@ def validate(params, expected_cls: type | None = None) -> None:
                 continue
             _check_array(f"{label}.{name}", a, spec)
             if spec.bands:
-                bands[name] = a
+                bands[name] = _n_bands(a.shape)
     _check_bands(label, bands)
     extra = getattr(params, "_validate", None)
     if extra is not None and concrete:
@@ -325,12 +378,22 @@ def check_value(label: str, v, spec: ParamSpec) -> None:
 
 
 def _check_array(label: str, a: np.ndarray, spec: ParamSpec) -> None:
-    bad = ~np.isfinite(a) | ~spec.contains(a)
+    # compared in the value's precision: a float32 pi/2 (1.5707964) is on the bound [0, pi/2]
+    t = a.dtype.type if a.dtype.kind == "f" else float
+    lo, hi = float(t(spec.lo)), float(t(spec.hi))
+    if a.size == 0 or (_in_range(float(a.min()), spec, lo, hi) and _in_range(float(a.max()), spec, lo, hi)):
+        return  # min/max propagate NaN: two reductions decide the common, valid case
+    ok = (a > lo) if spec.lo_open else (a >= lo)
+    ok &= (a < hi) if spec.hi_open else (a <= hi)
+    bad = ~np.isfinite(a) | ~ok
     if np.any(bad):
         first = a[bad].flat[0] if a.ndim else a
         what = "is not finite; valid range" if not np.isfinite(first) else "is outside the valid range"
+        shown = f"{float(first):g}"
+        if shown in (_fmt(spec.lo), _fmt(spec.hi)):  # just past a bound: show the digits that matter
+            shown = f"{float(first):.9g}"
         raise ValueError(
-            f"{label} = {float(first):g} {what} {spec.range_str()}"
+            f"{label} = {shown} {what} {spec.range_str()}"
             + (f" [{spec.unit}]" if spec.unit not in ("", "1") else "")
             + (f" ({spec.doc})" if spec.doc else "")
         )
@@ -363,7 +426,7 @@ def check_traced(params) -> None:
             continue
         x = jnp.asarray(v)
         if spec.bands:
-            bands[name] = np.empty(np.shape(x)[-1:])
+            bands[name] = _n_bands(np.shape(x))
         ok = jnp.isfinite(x)
         ok &= (x > spec.lo) if spec.lo_open else (x >= spec.lo)
         ok &= (x < spec.hi) if spec.hi_open else (x <= spec.hi)

@@ -151,12 +151,13 @@ def _is_number(c) -> bool:
         isinstance(c, (np.ndarray, jax.Array)) and np.ndim(c) == 0)
 
 
-def as_direction(name: str, w) -> Vec3:
-    """Direction argument ``name`` (``"wi"``, ``"wo"``) of a public function as a checked Vec3.
+def as_direction(name: str, w, check: bool = True) -> Vec3:
+    """Direction argument ``name`` (``"wi"``, ``"wo"``) of a public function as a Vec3.
 
-    Conversions and checks as in the module docstring; traced inputs (inside the user's
-    ``jit``) are converted but not checked. Raises ``TypeError`` for an unsupported type and
-    ``ValueError`` for a non-finite, zero-length or non-unit concrete vector.
+    Conversions and checks as in the module docstring (``check=False``: convert only, for a
+    caller that checks several directions at once with :func:`check_directions`). Raises
+    ``TypeError`` for an unsupported type and ``ValueError`` for a non-finite, zero-length or
+    non-unit concrete vector.
     """
     if isinstance(w, Vec3):
         v = w
@@ -173,30 +174,48 @@ def as_direction(name: str, w) -> Vec3:
         v = Vec3.from_array(w)
     else:
         raise TypeError(f"{name}: expected {_ACCEPTED}, got {type(w).__name__}")
-    check_unit(name, v)
+    if check:
+        check_directions({name: v})
     return v
 
 
+# below this many components in all, directions are checked on the host: a device reduction
+# costs a dispatch and a synchronisation (~50 us), numpy a few us on a handful of values
+_HOST_CHECK_MAX = 4096
+
+
 @jax.jit
-def _any_bad(x, y, z):
-    n2 = x * x + y * y + z * z
-    return jnp.any(~(jnp.isfinite(n2) & (n2 >= _N2_LO) & (n2 <= _N2_HI)))
+def _any_bad(vectors):
+    bad = jnp.zeros((), bool)
+    for x, y, z in vectors:
+        n2 = x * x + y * y + z * z
+        bad |= jnp.any(~(jnp.isfinite(n2) & (n2 >= _N2_LO) & (n2 <= _N2_HI)))
+    return bad
 
 
-def check_unit(name: str, v: Vec3) -> None:
-    """``ValueError`` naming ``name`` unless every concrete direction of ``v`` is a finite unit
-    vector (within :data:`UNIT_TOLERANCE`); traced components are not checked. Device arrays
-    are checked by one fused reduction; the offending entry is looked up only on failure."""
-    comps = (v.x, v.y, v.z)
-    if any(isinstance(c, jax.core.Tracer) for c in comps):
+def check_directions(named: dict) -> None:
+    """``ValueError`` naming the argument unless every concrete direction of the Vec3s in
+    ``named`` (argument name -> Vec3) is a finite unit vector within :data:`UNIT_TOLERANCE`.
+
+    Traced vectors are not checked. Large device arrays are checked by one fused reduction
+    (one synchronisation for all of them); the offending entry is looked up only on failure.
+    """
+    concrete = {n: v for n, v in named.items() if not any(isinstance(c, jax.core.Tracer) for c in v)}
+    if not concrete:
         return
-    if any(isinstance(c, jax.Array) for c in comps):
-        bad = _any_bad(*comps)  # under an outer trace (constants closed over) a tracer: check on the host
+    if sum(np.size(c) for v in concrete.values() for c in v) > _HOST_CHECK_MAX:
+        bad = _any_bad(tuple(tuple(v) for v in concrete.values()))
+        # under an outer trace (constants closed over) the result is a tracer: check on the host
         if not isinstance(bad, jax.core.Tracer) and not bool(bad):
             return
-    comps = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in comps))
+    for n, v in concrete.items():
+        _check_host(n, v)
+
+
+def _check_host(name: str, v: Vec3) -> None:
+    comps = np.broadcast_arrays(*(np.asarray(c, dtype=np.float64) for c in v))
     n2 = comps[0] ** 2 + comps[1] ** 2 + comps[2] ** 2
-    finite = np.isfinite(comps[0]) & np.isfinite(comps[1]) & np.isfinite(comps[2])
+    finite = np.isfinite(n2)
     bad = ~(finite & (n2 >= _N2_LO) & (n2 <= _N2_HI))
     if not np.any(bad):
         return

@@ -65,12 +65,27 @@ def _kind(spec: ParamSpec) -> str:
 def _forward(spec: ParamSpec, z):
     k = _kind(spec)
     if k == "box":
-        return spec.lo + (spec.hi - spec.lo) * 0.5 * (1.0 + jnp.sin(z))
+        return _inside(spec, spec.lo + (spec.hi - spec.lo) * 0.5 * (1.0 + jnp.sin(z)))
     if k == "lower":
-        return spec.lo + jnp.exp(z)
+        return _inside(spec, spec.lo + jnp.exp(z))
     if k == "upper":
-        return spec.hi - jnp.exp(-z)
+        return _inside(spec, spec.hi - jnp.exp(-z))
     return z
+
+
+def _inside(spec: ParamSpec, x):
+    """``x`` clipped to the declared range in its own precision, one ulp inside an open bound:
+    rounding (or exp underflowing to 0) must not leave the range, so every Params the fitters
+    build passes the construction checks of :mod:`appearance_jax.core.params`. The identity
+    (value and gradient) inside the range."""
+    t = np.dtype(jnp.result_type(x)).type
+    lo, hi = t(spec.lo), t(spec.hi)
+    tiny = np.finfo(t).tiny  # the next float after 0 is subnormal: flushed to 0 by XLA
+    if spec.lo_open and np.isfinite(lo):
+        lo = tiny if lo == 0 else np.nextafter(lo, t(np.inf))
+    if spec.hi_open and np.isfinite(hi):
+        hi = -tiny if hi == 0 else np.nextafter(hi, t(-np.inf))
+    return jnp.clip(x, lo, hi)
 
 
 def _inverse(spec: ParamSpec, x):
