@@ -302,3 +302,12 @@ def test_export_options_are_checked_first(fitted, tmp_path, capsys):
     assert _export([str(corr), "--dict", "--approximate"]) == 0
     io = capsys.readouterr()
     assert json.loads(io.out)["type"] == "roughconductor" and "approximated: rough_conductor.shadowing" in io.err
+
+
+def test_registered_in_the_command_line(fitted, tmp_path, capsys):
+    from appearance_jax.cli import main
+
+    assert main(["export", str(fitted), "--out", str(tmp_path / "m.xml")]) == 0
+    assert (tmp_path / "m.xml").read_text().startswith("<?xml")
+    assert main(["export", str(fitted), "--out", str(tmp_path)]) == 2  # bad input: exit status 2, one line
+    assert "appearance-jax export: error: --out" in capsys.readouterr().err

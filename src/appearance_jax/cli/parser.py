@@ -12,17 +12,19 @@ from __future__ import annotations
 
 import argparse
 
+from ..export import cli as export_cmd
 from . import demo_cmd, eval_cmd, fit_cmd, models_cmd
 from .checks import EXIT_CODES
 
 #: the command modules, in the order of the help text
-COMMANDS = [models_cmd, eval_cmd, fit_cmd, demo_cmd]
+COMMANDS = [models_cmd, eval_cmd, fit_cmd, export_cmd, demo_cmd]
 
 DESCRIPTION = """\
 appearance-jax: differentiable BSDF models and a fitting pipeline for measured reflectance.
 
 Commands: models (parameter tables), eval (a BSDF on an in-plane grid or at a
-table's directions), fit (a BSDF to a table, with a report), demo. Angles are in
+table's directions), fit (a BSDF to a table, with a report), export (a fit's
+params.json as a Mitsuba 3 BSDF), demo. Angles are in
 degrees on the command line; in-plane tables use a signed theta_o (theta_o =
 theta_i is the mirror direction, -theta_i retro-reflection). A TABLE is a .csv
 file (appearance-jax table v1), a MERL .binary file or proxy:NAME[:GRID] (a

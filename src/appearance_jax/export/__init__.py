@@ -9,6 +9,13 @@ has (``lambert``, ``rough_conductor``, ``rough_dielectric``, ``rough_plastic``, 
 The layer sits above the registry and the fitters (it reads the records they write).
 """
 
-from .mitsuba import EXPORTABLE, ExportError, differences, from_params_json, to_mitsuba, to_mitsuba_xml
-
 __all__ = ["EXPORTABLE", "ExportError", "differences", "from_params_json", "to_mitsuba", "to_mitsuba_xml"]
+
+
+def __getattr__(name):
+    # lazy: the command line imports export.cli for its parser without loading the models
+    if name in __all__:
+        from . import mitsuba
+
+        return getattr(mitsuba, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
