@@ -182,6 +182,16 @@ def test_eval_grid_of_a_one_band_model_is_written_as_grey_rgb(tmp_path):
     assert t.values.shape == (2, 3)
 
 
+def test_eval_grid_of_a_spectral_model_has_wavelength_columns(tmp_path):
+    wl = (420.0, 550.0, 680.0, 700.0)
+    assert main(["eval", "--model", "iridescent", "--param", "color=spectral",
+                 "--param", "wavelengths=" + ",".join(map(str, wl)), "--theta-i", "30", "--theta-o", "30",
+                 "--out", str(tmp_path)]) == 0
+    t = read_csv(tmp_path / "iridescent.csv")
+    np.testing.assert_array_equal(t.wavelengths, wl)
+    assert t.values.shape == (1, 4) and np.all(t.values > 0)
+
+
 def test_fit_that_does_not_converge_exits_3_and_says_so_last(lambert_csv, tmp_path, capsys):
     out = tmp_path / "fit"
     code = main(["fit", lambert_csv, "--model", "lambert", "--max-steps", "1", "--no-plots", "--out", str(out)])

@@ -40,7 +40,8 @@ def run(args) -> int:
             continue
         params = model.Params()
         ti, to, f = evaluate_in_plane(model, params, th_i, th_o)
-        write_table(grid_table(model, params, ti, to, f), os.path.join(args.out, f"{model.name}.csv"))
+        path = os.path.join(args.out, f"{model.name}.csv")
+        write_table(grid_table(model, params, ti, to, f), path, in_plane=True)
         sel = ti == 30.0
         curves.append((model.name, to[sel], luminance(f[sel]) * np.cos(np.deg2rad(to[sel]))))
         summary[model.name] = {"max_f_theta_i_30": float(f[sel].max())}

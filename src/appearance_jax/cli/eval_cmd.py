@@ -115,7 +115,7 @@ def run(args) -> int:
     from ..fit.tables.io import write_table
 
     path = os.path.join(args.out, f"{model.name}.csv")
-    write_table(grid_table(model, params, ti, to, f), path)
+    write_table(grid_table(model, params, ti, to, f), path, in_plane=True)
     cos_o = np.cos(np.deg2rad(to))
     curves = [(f"theta_i = {a:g}", to[ti == a], luminance(f[ti == a]) * cos_o[ti == a]) for a in th_i]
     plot_in_plane(os.path.join(args.out, f"{model.name}.png"), curves, f"{model.name} (in-plane)")
