@@ -1,5 +1,11 @@
 """The report's records: ``params.json`` and ``residuals.csv`` (see :mod:`~appearance_jax.fit.report`).
 
+``params.json`` carries the uncertainties of :meth:`FitResult.to_dict` (docs/fitting.md): per
+parameter the default ``sigma`` (``null`` with a ``sigma_note`` at a bound or in a flat
+direction) and every kind computed (``sigma_iid``, ``sigma_hc1``, ``sigma_sandwich``,
+``sigma_bootstrap`` with its percentile intervals); ``uncertainty`` (the default method and
+its clusters), ``correlation`` (``labels``, ``matrix``), ``degeneracies`` and ``warnings``.
+
 :func:`entry_status` says for every (direction, band) entry of the table whether the fit used it
 and, if not, why; both records count the entries by it.
 """

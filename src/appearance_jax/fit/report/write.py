@@ -49,7 +49,8 @@ def write_report(result, out_dir, *, model=None, progress=print, extra=None, plo
                 figures[name] = d
             say(f"  {q}" + (f": {d}" if d else ""))
     q = os.path.join(out_dir, "params.json")
-    write_params_json(result, q, extra=extra, status=status, figures=figures)
+    d = write_params_json(result, q, extra=extra, status=status, figures=figures)
     paths["params"] = q
-    say(f"  {q}")
+    n_warn = len(d.get("warnings") or [])
+    say(f"  {q}" + (f": {n_warn} warning{'s' if n_warn > 1 else ''} (see 'warnings')" if n_warn else ""))
     return {k: paths[k] for k in ("params", "residuals", "maps", "slices", "scatter") if k in paths}

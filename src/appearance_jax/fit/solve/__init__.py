@@ -2,14 +2,16 @@
 
 Modules: ``residuals`` (metrics and error summaries), ``transforms`` (bounded <-> unconstrained
 parameter spaces), ``problem`` (a fit's data and residuals),
-``solvers`` (:func:`fit`, the solvers, multi-start), ``result`` (:class:`FitResult`, uncertainties)
-and ``batch`` (:func:`fit_batch`: many tables at once with vmap and sharding).
+``solvers`` (:func:`fit`, the solvers, multi-start), ``result`` (:class:`FitResult`),
+``uncertainty`` (iid, sandwich and bootstrap sigmas, degeneracies) and ``batch``
+(:func:`fit_batch`: many tables at once with vmap and sharding).
 """
 
 from .batch import BatchFitResult, fit_batch
 from .problem import Problem, build_problem, entry_arrays
-from .result import FitResult, covariance, finish
+from .result import FitResult, finish
+from .uncertainty import covariances
 from .solvers import SOLVERS, fit, solve_z
 
 __all__ = ["fit", "FitResult", "fit_batch", "BatchFitResult", "build_problem", "entry_arrays", "solve_z",
-           "covariance", "finish", "Problem", "SOLVERS"]
+           "covariances", "finish", "Problem", "SOLVERS"]

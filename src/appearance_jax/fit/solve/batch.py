@@ -29,8 +29,9 @@ import numpy as np
 
 from ..tables.table import Table
 from .problem import build_problem, entry_arrays
-from .result import FitResult, covariance, finish, flags
-from .solvers import SOLVERS, solve_z
+from . import uncertainty as unc
+from .result import FitResult, finish, flags, sigma_kinds
+from .solvers import SOLVERS, bootstrap_refits, solve_z
 
 
 @dataclass
@@ -41,7 +42,7 @@ class BatchFitResult:
     labels: tuple
     units: tuple
     x: np.ndarray  # (K, p)
-    sigma: np.ndarray  # (K, p)
+    sigma: np.ndarray  # (K, p) default 1-sigma (method sigma_method; NaN at a bound or flat), as FitResult.sigma
     loss: np.ndarray  # (K,) mean squared residual in the fit metric
     iterations: np.ndarray  # (K,)
     converged: np.ndarray  # (K,)
@@ -52,10 +53,16 @@ class BatchFitResult:
     n_devices: int
     solver: str
     metric: str
+    sigma_method: str = "cluster"
+    sigma_iid: np.ndarray | None = None  # (K, p) each kind as FitResult's
+    sigma_hc1: np.ndarray | None = None
+    sigma_sandwich: np.ndarray | None = None  # cluster-robust over incidence directions
+    n_clusters: int = 0
     _problem: object = None
     _z: np.ndarray | None = None
     _data: dict | None = None
     _masked: list | None = None  # per item: reason -> count
+    _solve_kw: dict = dataclasses.field(default_factory=dict)  # rtol, atol, max_steps of the solve
 
     def __len__(self) -> int:
         return self.x.shape[0]
@@ -67,6 +74,23 @@ class BatchFitResult:
         r = finish(problem, None, self._z[k], 0.5 * self.loss[k] * max(int((np.asarray(data["weight"]) > 0).sum()), 1),
                    self.iterations[k], self.converged[k], self.wall_time, self.solver, data=data)
         return r
+
+    def bootstrap(self, n_boot: int = 64, seed: int = 0, items=None) -> dict:
+        """Block bootstrap over incidence directions for every item (or ``items``: indices), in one
+        vmapped solve.
+
+        Returns {"sigma": (k, p), "interval68", "interval95": (k, p, 2), "replicates": n_boot,
+        "failed": (k,) refits that did not converge} (:func:`~.uncertainty.bootstrap_summary`).
+        """
+        idx = np.arange(len(self)) if items is None else np.asarray(items, int)
+        kw = dict(solver=self.solver, **self._solve_kw)
+        xs, ok = bootstrap_refits(self._problem, self._z[idx], n_boot, seed, f=self._data["f"][idx],
+                                  weight=self._data["weight"][idx], **kw)
+        items = [unc.bootstrap_summary(x, o) for x, o in zip(xs, ok)]
+        return dict(sigma=np.stack([d["sigma"] for d in items]),
+                    interval68=np.stack([d["interval68"] for d in items]),
+                    interval95=np.stack([d["interval95"] for d in items]), replicates=int(n_boot),
+                    failed=np.array([d["failed"] for d in items]), seed=int(seed))
 
 
 def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, fix=None, metric: str = "l2",
@@ -125,13 +149,14 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     z0 = jnp.broadcast_to(z0, (len(idx), z0.shape[0]))
 
     in_axes = ({n: (0 if n in per_item else None) for n in data},)
+    cl, n_cl, _ = unc.incidence_clusters(problem.data["wi"])
+    cl = jnp.asarray(cl)
 
     def run(z0s, data):
         def one(z, d):
             z, loss, steps, ok = solve_z(problem, z, d, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps)
             x = sp.x_from_z(z)
-            cov, lam, vec = covariance(problem, x, d)
-            return z, x, jnp.sqrt(jnp.abs(jnp.diag(cov))), lam, vec, loss, steps, ok
+            return z, x, unc.covariances(problem, x, d, cl, n_cl), loss, steps, ok
 
         return jax.vmap(one, in_axes=(0,) + in_axes)(z0s, data)
 
@@ -145,12 +170,18 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     t0 = time.perf_counter()
     compiled = jax.jit(run).lower(z0, data).compile()
     t1 = time.perf_counter()
-    z, x, sig, lam, vec, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
+    z, x, out, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1
-    z, x, sig, lam, vec, loss, steps, ok = (np.asarray(a)[:K] for a in (z, x, sig, lam, vec, loss, steps, ok))
-    bound, flat = flags(sp, x, sig, lam, vec)
+    z, x, loss, steps, ok = (np.asarray(a)[:K] for a in (z, x, loss, steps, ok))
+    out = {k: np.asarray(v)[:K] for k, v in out.items()}
+    method, raw, sig = sigma_kinds(sp, x, out)
+    bound, flat = flags(sp, x, raw, [out["iid"], out[method]], out["flat"])
+    diag = lambda c: np.sqrt(np.abs(np.diagonal(c, axis1=-2, axis2=-1)))  # noqa: E731
     data_k = {n: (v if n not in per_item else np.asarray(v)[:K]) for n, v in data.items()}
     return BatchFitResult(model=problem.model.name, labels=sp.labels, units=sp.units(), x=x, sigma=sig,
                           loss=2.0 * loss / np.maximum(n_valid, 1), iterations=steps, converged=ok, at_bound=bound,
                           poorly_determined=flat, wall_time=wall, compile_time=t1 - t0, n_devices=n_dev,
-                          solver=solver, metric=metric, _problem=problem, _z=z, _data=data_k, _masked=masked)
+                          solver=solver, metric=metric, sigma_method=method, sigma_iid=diag(out["iid"]),
+                          sigma_hc1=diag(out["hc1"]), sigma_sandwich=diag(out["cluster"]),
+                          n_clusters=int(np.min(out["g"])), _problem=problem, _z=z, _data=data_k, _masked=masked,
+                          _solve_kw=dict(rtol=rtol, atol=atol, max_steps=max_steps))

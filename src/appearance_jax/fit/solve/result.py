@@ -1,19 +1,21 @@
 """The result of a fit: parameters, uncertainties, flags and the fitted values (:class:`FitResult`).
 
-Uncertainties (:func:`covariance`): at the optimum x* the Jacobian J of the residuals with
-respect to the **physical** free parameters gives Cov = s^2 (J^T J)^-1, with s^2 = RSS /
-(m - p) (m valid residuals, p parameters) unless the table carries per-value sigma, in which
-case the residuals are chi-square normalised and s^2 = 1. Parameters on a bound are
-reported as such (the linearisation does not hold there). Flat directions: eigenvectors of
-the scaled normal matrix D^-1 J^T J D^-1 (D = column norms, so units do not matter) with an
-eigenvalue below ``flat_tol`` times the largest; every parameter with a component > 0.3 in
-one of them is "poorly determined", as is any with a 1-sigma larger than its value's
-magnitude or its range.
+Uncertainties (:mod:`~appearance_jax.fit.solve.uncertainty`): at the optimum x* the Jacobian of
+the residuals with respect to the **physical** free parameters gives the iid covariance
+s^2 (J^T J)^-1, the entry sandwich (HC1), the cluster-robust sandwich over incidence directions
+(CR1) and, on request (``fit(..., bootstrap=B)``), a block bootstrap over incidence directions.
+``sigma`` is the default: the cluster sandwich when the table has enough incidence directions,
+else HC1, never below the iid sigma (docs/fitting.md, "Uncertainties"). Parameters on a bound
+get sigma = NaN (the linearisation does not hold there; the report prints "at bound"), and so do
+parameters in an exactly flat direction. ``poorly_determined`` lists the parameters of
+unresolved directions (noise-derived rule of :func:`~.uncertainty.degeneracies`) and those whose
+sigma exceeds their magnitude or range; ``degeneracies`` names the groups and what to fix;
+``warnings`` collects what a user must read (not converged, parameters at bounds, degenerate
+groups, too few incidence directions, residuals larger than the stated sigma).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,34 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..tables.table import Table
+from . import uncertainty as unc
 from .problem import Problem
 from .residuals import FLOOR, error_metrics, residual, residual_scale
 from .transforms import ParamSpace
 
 
-def covariance(problem: Problem, x, data, *, flat_tol: float = 1e-9):
-    """(cov, eigenvalues, eigenvectors) at physical x: traceable, so vmap it over a batch.
-
-    See the module docstring. Rows/columns of ``cov`` that touch a flat direction are NaN
-    (the variance along it is unbounded); eigenvalues are relative to the largest.
-    """
-    J = jax.jacfwd(problem.residuals_x)(x, data)
-    r = problem.residuals_x(x, data)
-    m = jnp.sum(data["weight"] > 0)
-    p = J.shape[1]
-    d = jnp.linalg.norm(J, axis=0)
-    d = jnp.where(d > 0, d, 1.0)
-    Js = J / d
-    lam, vec = jnp.linalg.eigh(Js.T @ Js)
-    big = jnp.maximum(lam[-1], jnp.finfo(lam.dtype).tiny)
-    ok = lam > flat_tol * big
-    inv = (vec * jnp.where(ok, 1.0 / jnp.where(ok, lam, 1.0), 0.0)) @ vec.T
-    s2 = 1.0 if problem.absolute_sigma else (r @ r) / jnp.maximum(m - p, 1)
-    cov = inv / jnp.outer(d, d) * s2
-    flat = jnp.any((jnp.abs(vec) > 0.3) & ~ok[None, :], axis=1)
-    cov = jnp.where(flat[:, None] | flat[None, :], jnp.nan, cov)
-    return cov, lam / big, vec
-
+FIELD = {"iid": "sigma_iid", "hc1": "sigma_hc1", "cluster": "sigma_sandwich", "bootstrap": "sigma_bootstrap"}
 
 # ---------------------------------------------------------------------------------------
 # the result
@@ -57,7 +38,14 @@ def covariance(problem: Problem, x, data, *, flat_tol: float = 1e-9):
 
 @dataclass
 class FitResult:
-    """Outcome of a fit. ``values``/``sigma`` map each free entry label to a number."""
+    """Outcome of a fit. ``values``/``sigma`` map each free entry label to a number.
+
+    ``sigma`` is the default 1-sigma (method ``sigma_method``: ``"cluster"`` or ``"hc1"``, see
+    :mod:`~appearance_jax.fit.solve.uncertainty`), NaN at a bound or along an exactly flat
+    direction; ``cov`` its covariance. ``sigma_iid``, ``sigma_hc1``, ``sigma_sandwich`` (the
+    cluster-robust one) and ``sigma_bootstrap`` (None unless ``fit(..., bootstrap=B)``) are the
+    raw estimates of each kind.
+    """
 
     model: str
     params: Any  # the fitted Params (fixed fields at their fixed values)
@@ -84,6 +72,17 @@ class FitResult:
     fitted: np.ndarray | None = None  # model BRDF (N, B) at the table's directions
     compile_time: float = 0.0  # seconds spent tracing and compiling the solve
     fit_mask: np.ndarray | None = None  # (N, B) True for the entries the fit used (after every mask and weight)
+    sigma_method: str = "iid"
+    sigma_iid: np.ndarray | None = None
+    sigma_hc1: np.ndarray | None = None
+    sigma_sandwich: np.ndarray | None = None  # cluster-robust (CR1) over incidence directions
+    sigma_bootstrap: np.ndarray | None = None
+    bootstrap: dict | None = None  # replicates, failed, seed, interval68, interval95 (p, 2)
+    cov_iid: np.ndarray | None = None
+    n_clusters: int = 0
+    clusters: str = ""  # what a cluster is ("incidence direction", "theta_i bins of 3 deg")
+    degeneracies: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
 
     @property
     def values(self) -> dict:
@@ -92,6 +91,21 @@ class FitResult:
     @property
     def uncertainties(self) -> dict:
         return dict(zip(self.labels, self.sigma.tolist()))
+
+    def sigmas(self) -> dict:
+        """{kind: (p,) array} of every sigma computed: iid, hc1, cluster and (if run) bootstrap."""
+        out = {"iid": self.sigma_iid, "hc1": self.sigma_hc1, "cluster": self.sigma_sandwich,
+               "bootstrap": self.sigma_bootstrap}
+        return {k: v for k, v in out.items() if v is not None}
+
+    def sigma_note(self, label: str) -> str | None:
+        """Why the default sigma of ``label`` is not reported (None when it is)."""
+        if label in self.at_bound:
+            return "at bound: the linearised sigma does not hold"
+        i = self.labels.index(label)
+        if not np.isfinite(self.sigma[i]):
+            return "flat direction: the data do not determine it"
+        return None
 
     def entry_residuals(self) -> tuple[np.ndarray, np.ndarray | None]:
         """(residual, residual / its sigma) of every (direction, band) entry of the table, (N, B) float64.
@@ -114,24 +128,46 @@ class FitResult:
         return r, z
 
     def correlation(self) -> np.ndarray:
-        s = np.sqrt(np.diag(self.cov))
+        """Correlation matrix of the default covariance (NaN rows at bounds and flat directions)."""
+        s = np.sqrt(np.abs(np.diag(self.cov)))
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self.cov / np.outer(s, s)
+            c = self.cov / np.outer(s, s)
+        bad = ~np.isfinite(self.sigma)
+        return np.where(bad[:, None] | bad[None, :], np.nan, c)
 
     def to_dict(self) -> dict:
         """JSON-ready record (params.json of the command line)."""
         def num(v):
-            return None if not np.isfinite(v) else float(v)
+            return None if v is None or not np.isfinite(v) else float(v)
 
+        def param(i, lab):
+            note = self.sigma_note(lab)
+            rec = dict(value=float(self.x[i]), sigma=None if note else num(self.sigma[i]), unit=self.units[i],
+                       at_bound=lab in self.at_bound, poorly_determined=lab in self.poorly_determined)
+            if note:
+                rec["sigma_note"] = note
+            for kind, s in self.sigmas().items():
+                rec[FIELD[kind]] = None if lab in self.at_bound else num(s[i])
+            if self.bootstrap is not None:
+                for k in ("interval68", "interval95"):
+                    rec[f"bootstrap_{k}"] = [num(v) for v in self.bootstrap[k][i]]
+            return rec
+
+        boot = None if self.bootstrap is None else {k: self.bootstrap[k] for k in ("replicates", "failed", "seed")}
         return dict(
             model=self.model, solver=self.solver, metric=self.metric, converged=bool(self.converged),
             iterations=int(self.iterations), wall_time_s=float(self.wall_time),
             compile_time_s=float(self.compile_time), loss=num(self.loss),
             errors={k: (num(v) if isinstance(v, float) else v) for k, v in self.metrics.items()},
             n_valid=self.n_valid, masked=self.masked, fixed=self.fixed,
-            parameters={lab: dict(value=float(v), sigma=num(s), unit=u, at_bound=lab in self.at_bound,
-                                  poorly_determined=lab in self.poorly_determined)
-                        for lab, v, s, u in zip(self.labels, self.x, self.sigma, self.units)},
+            parameters={lab: param(i, lab) for i, lab in enumerate(self.labels)},
+            uncertainty=dict(method=self.sigma_method, description=unc.DESCRIPTION.get(self.sigma_method, ""),
+                             floor="never below sigma_iid", kinds=list(self.sigmas()),
+                             n_clusters=int(self.n_clusters), clusters=self.clusters,
+                             min_clusters=unc.min_clusters(len(self.labels)), bootstrap=boot),
+            correlation=dict(method=self.sigma_method, labels=list(self.labels),
+                             matrix=[[num(v) for v in row] for row in self.correlation()]),
+            degeneracies=self.degeneracies, warnings=list(self.warnings),
             starts=self.starts, source=None if self.table is None else self.table.source,
         )
 
@@ -139,16 +175,25 @@ class FitResult:
         lines = [f"{self.model} fitted with {self.solver} ({self.metric} metric): "
                  f"{'converged' if self.converged else 'NOT converged'} in {self.iterations} iterations, "
                  f"{self.wall_time:.2f} s (+ {self.compile_time:.1f} s compile); loss {self.loss:.4g} over {self.n_valid} values"]
+        kinds = self.sigmas()
+        if kinds:
+            lines.append(f"  +- is 1 sigma, {unc.DESCRIPTION.get(self.sigma_method, self.sigma_method)} "
+                         f"({self.n_clusters} clusters: {self.clusters}), never below iid")
         w = max(len(lab) for lab in self.labels)
-        for lab, v, s, u in zip(self.labels, self.x, self.sigma, self.units):
-            flag = " (at bound)" if lab in self.at_bound else " (poorly determined)" if lab in self.poorly_determined else ""
+        for i, (lab, v, s, u) in enumerate(zip(self.labels, self.x, self.sigma, self.units)):
             unit = "" if u in ("1", "") else f" {u}"
-            lines.append(f"  {lab.ljust(w)} = {v:.6g} +- {s:.2g}{unit}{flag}")
+            if lab in self.at_bound:
+                lines.append(f"  {lab.ljust(w)} = {v:.6g}{unit} (at bound)")
+                continue
+            flag = " (poorly determined)" if lab in self.poorly_determined else ""
+            other = ", ".join(f"{k} {kinds[k][i]:.2g}" for k in kinds if k != self.sigma_method)
+            lines.append(f"  {lab.ljust(w)} = {v:.6g} +- {s:.2g}{unit}{flag}" + (f"  [{other}]" if other else ""))
         if self.fixed:
             lines.append("  fixed: " + ", ".join(f"{k} = {v}" for k, v in self.fixed.items()))
         lines.append("  errors: " + ", ".join(f"{k} {v:.4g}" for k, v in self.metrics.items() if k != "n"))
         if self.masked:
             lines.append("  masked: " + ", ".join(f"{n} {why}" for why, n in self.masked.items()))
+        lines += [f"  warning: {msg}" for msg in self.warnings]
         return "\n".join(lines)
 
 
@@ -160,39 +205,96 @@ def _fixed_record(space: ParamSpace) -> dict:
     return out
 
 
-def flags(space: ParamSpace, x, sigma, lam, vec, flat_tol: float = 1e-9):
-    """(at_bound, poorly_determined) bool arrays (..., p); numpy, leading batch axes allowed."""
-    x, sigma, lam, vec = (np.asarray(a, np.float64) for a in (x, sigma, lam, vec))
+def flags(space: ParamSpace, x, sigma, covs, exact_flat):
+    """(at_bound, poorly_determined) bool arrays (..., p); numpy, leading batch axes allowed.
+
+    ``sigma`` the default sigma, ``covs`` a list of covariances (..., p, p) (iid and the default
+    method) for the unresolved-direction rule, ``exact_flat`` (..., p) from
+    :func:`~.uncertainty.covariances`.
+    """
+    x, sigma = np.asarray(x, np.float64), np.asarray(sigma, np.float64)
     bound = space.at_bound(x)
-    small = (lam < flat_tol)[..., None, :]  # (..., 1, p): eigenvalue j is flat
-    flat = np.any((np.abs(vec) > 0.3) & small, axis=-1)
+    flat = np.asarray(exact_flat, bool).copy()
+    covs = [np.asarray(c, np.float64) for c in covs]
+    xs, cs = x.reshape(-1, x.shape[-1]), [c.reshape(-1, *c.shape[-2:]) for c in covs]
+    noise_flat = np.stack([unc.flat_members(space, xs[k], [c[k] for c in cs]) for k in range(xs.shape[0])])
+    flat |= noise_flat.reshape(flat.shape)
     specs = [f.spec for f in space.fields for _ in range(f.size)]
-    width = np.array([s.hi - s.lo if math.isfinite(s.hi - s.lo) else np.inf for s in specs])
+    width = np.array([s.hi - s.lo for s in specs], np.float64)
     flat |= ~np.isfinite(sigma) | (sigma > np.maximum(np.abs(x), 1e-12)) | (sigma > width)
     return bound, flat & ~bound
 
 
-def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, starts=None, data=None) -> FitResult:
-    """Turn a solver's z into a :class:`FitResult` (uncertainties, flags, error metrics)."""
+def sigma_kinds(space: ParamSpace, x, out: dict):
+    """(method, raw default sigma, sigma) from the covariances of :func:`~.uncertainty.covariances` (numpy,
+    batch axes allowed): the default sigma is NaN at a bound and in an exactly flat direction."""
+    method = unc.default_method(np.min(np.asarray(out["g"])), space.size)
+    raw = unc.default_sigma(out["iid"], out[method])
+    bad = space.at_bound(x) | np.asarray(out["flat"], bool)
+    return method, raw, np.where(bad, np.nan, raw)
+
+
+def _warnings(res: FitResult, s2: float, absolute: bool) -> list:
+    out = []
+    if not res.converged:
+        out.append(f"the solver did not converge in {res.iterations} iterations: the values are not an optimum")
+    if len(res.at_bound) >= 2:
+        out.append(f"{len(res.at_bound)} parameters ended at a bound ({', '.join(res.at_bound)}): the model or its "
+                   "free parameters do not suit this table; fix physically known ones (e.g. a coat's eta) or "
+                   "try another model")
+    out += [f"degenerate: {g['text']}" for g in res.degeneracies]
+    p = len(res.labels)
+    if res.sigma_method != "cluster":
+        out.append(f"only {res.n_clusters} incidence directions (< {unc.min_clusters(p)} for {p} parameters): "
+                   "sigma is the entry sandwich (HC1), blind to residuals correlated within an incidence; "
+                   "it may be too small")
+    if absolute and s2 > 4.0:
+        out.append(f"the residuals are {np.sqrt(s2):.3g} x the table's sigma (reduced chi-square {s2:.3g}): "
+                   "the model does not fit within the stated uncertainties")
+    if res.bootstrap is not None and res.bootstrap["failed"]:
+        out.append(f"bootstrap: {res.bootstrap['failed']} of {res.bootstrap['replicates']} refits did not converge "
+                   "and were left out")
+    return out
+
+
+def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, starts=None, data=None,
+           bootstrap=None) -> FitResult:
+    """Turn a solver's z into a :class:`FitResult` (uncertainties, flags, error metrics).
+
+    ``bootstrap``: the summary of :func:`~.uncertainty.bootstrap_summary` (plus ``seed``) or None.
+    """
     data = problem.data if data is None else data
     sp = problem.space
     x = sp.x_from_z(jnp.asarray(z))
-    cov, lam, vec = (np.asarray(a, np.float64) for a in jax.jit(lambda x, d: covariance(problem, x, d))(x, data))
+    cl, n_cl, what = unc.incidence_clusters(data["wi"])
+    out = jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl))(x, data, jnp.asarray(cl))
+    out = {k: np.asarray(v) for k, v in out.items()}
     x = np.asarray(x, np.float64)
-    sigma = np.sqrt(np.abs(np.diag(cov)))
-    bound, flat = flags(sp, x, sigma, lam, vec)
+    method, raw, sigma = sigma_kinds(sp, x, out)
+    cov = np.asarray(out[method], np.float64)
+    exact = np.asarray(out["flat"], bool)
+    cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
+    bound, flat = flags(sp, x, raw, [out["iid"], out[method]], exact)
     params = sp.params_from_x(jnp.asarray(x))
     w = np.asarray(data["weight"]) > 0
     fitted = np.asarray(problem.evaluate(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))
     m = int(w.sum())
-    return FitResult(
+    diag = lambda c: np.sqrt(np.abs(np.diag(np.asarray(c, np.float64))))  # noqa: E731
+    res = FitResult(
         model=problem.model.name, params=params, labels=sp.labels, units=sp.units(), x=x, sigma=sigma, cov=cov,
         at_bound=tuple(lab for lab, b in zip(sp.labels, bound) if b),
-        poorly_determined=tuple(lab for lab, b in zip(sp.labels, flat) if b), eigenvalues=lam,
+        poorly_determined=tuple(lab for lab, b in zip(sp.labels, flat) if b), eigenvalues=out["lam"],
         loss=float(2.0 * loss_half / max(m, 1)), metrics=metrics, iterations=int(steps), wall_time=float(wall),
         converged=bool(ok), solver=solver, metric=problem.metric, n_valid=m, masked=problem.masked,
-        fixed=_fixed_record(sp), starts=starts or {}, table=table, fitted=fitted, fit_mask=w)
+        fixed=_fixed_record(sp), starts=starts or {}, table=table, fitted=fitted, fit_mask=w,
+        sigma_method=method, sigma_iid=diag(out["iid"]), sigma_hc1=diag(out["hc1"]),
+        sigma_sandwich=diag(out["cluster"]), cov_iid=np.asarray(out["iid"], np.float64),
+        n_clusters=int(out["g"]), clusters=what, bootstrap=bootstrap,
+        sigma_bootstrap=None if bootstrap is None else np.asarray(bootstrap["sigma"], np.float64))
+    res.degeneracies = unc.degeneracies(sp, x, sp.labels, [out["iid"], out[method]], exact, bound)
+    res.warnings = _warnings(res, float(out["s2"]), bool(problem.absolute_sigma))
+    return res
 
 
-__all__ = ["FitResult", "covariance", "flags", "finish"]
+__all__ = ["FitResult", "flags", "finish", "sigma_kinds"]

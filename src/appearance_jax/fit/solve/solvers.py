@@ -31,6 +31,7 @@ import numpy as np
 
 from ..tables.table import Table
 from .problem import Problem, build_problem, start_params
+from . import uncertainty as unc
 from .result import FitResult, finish
 
 SOLVERS = ("lm", "gn", "dogleg", "bfgs", "jaxopt_lm")
@@ -111,7 +112,7 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
 def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights=None,
         max_theta_deg: float | None = 85.0, use_sigma: bool = True, solver: str = "lm", rtol: float = 1e-8,
         atol: float = 1e-10, max_steps: int = 400, n_starts: int = 1, seed: int = 0, key=None,
-        model_kwargs=None, verbose: int = 0) -> FitResult:
+        model_kwargs=None, verbose: int = 0, bootstrap: int = 0, bootstrap_seed: int = 0) -> FitResult:
     """Fit ``model`` (a registered name or Model) to ``table``.
 
     Args:
@@ -127,11 +128,19 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         n_starts: > 1 adds n_starts - 1 random starts (``seed``) and keeps the best.
         key: PRNG key for stochastic models (common random numbers).
         verbose: print step and loss every ``verbose`` steps (0: silent).
+        bootstrap: number of block-bootstrap replicates (0: none; >= 2): incidence directions
+            resampled with replacement (``bootstrap_seed``) and refitted from the optimum in one
+            vmapped solve; sets ``sigma_bootstrap`` and ``bootstrap`` (percentile intervals) of
+            the result (:mod:`~appearance_jax.fit.solve.uncertainty`). 64 is a good start.
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
     if n_starts < 1:
         raise ValueError(f"n_starts = {n_starts} must be >= 1")
+    if bootstrap != 0:
+        unc.bootstrap_weights(np.zeros(1, int), np.ones(1, bool), bootstrap)  # checks the count eagerly
+    if not isinstance(bootstrap_seed, (int, np.integer)) or isinstance(bootstrap_seed, bool):
+        raise ValueError(f"bootstrap_seed = {bootstrap_seed!r} must be an int")
     inits = list(init) if isinstance(init, (list, tuple)) else [init]
     if not inits:
         raise ValueError("init: an empty list of starts")
@@ -164,10 +173,54 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         n = problem.space.size
         starts = dict(n_starts=n_starts, losses=(2 * loss / max(int((np.asarray(problem.data["weight"]) > 0).sum()), 1)).tolist(),
                       best=best, n_parameters=n)
+    boot = None
+    if bootstrap:
+        boot = _bootstrap(problem, z[best], bootstrap, bootstrap_seed, solver=solver, rtol=rtol, atol=atol,
+                          max_steps=max_steps)
     res = finish(problem, table, z[best], loss[best], np.asarray(steps)[best], np.asarray(ok)[best], wall,
-                 solver, starts)
+                 solver, starts, bootstrap=boot)
     res.compile_time = t1 - t0
     return res
 
 
-__all__ = ["fit", "solve_z", "SOLVERS"]
+def _bootstrap(problem: Problem, z, n_boot: int, seed: int, **solve_kw) -> dict:
+    """Block bootstrap of one fit: ``n_boot`` refits from its optimum ``z`` (:func:`bootstrap_refits`)."""
+    xs, ok = bootstrap_refits(problem, np.asarray(z)[None], n_boot, seed, **solve_kw)
+    out = unc.bootstrap_summary(xs[0], ok[0])
+    out["seed"] = int(seed)
+    return out
+
+
+def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None, weight=None, **solve_kw):
+    """Block-bootstrap refits over incidence directions, all in one vmapped solve.
+
+    ``zs`` (K, p): the optima of K fits of ``problem`` (K = 1 for :func:`fit`); ``f`` and
+    ``weight`` (K, N, B): their data (default: the problem's own, broadcast). Every replicate
+    multiplies the weights by sqrt(multiplicity) of the resampled incidence clusters
+    (:func:`~.uncertainty.bootstrap_weights`, the same ``n_boot`` draws for every fit), so
+    shapes stay fixed, and starts from the fit's optimum. Returns physical x (K, n_boot, p) and
+    converged (K, n_boot), numpy.
+    """
+    data = problem.data
+    zs = np.atleast_2d(np.asarray(zs))
+    K = zs.shape[0]
+    dt = jnp.result_type(float)
+    fs = np.broadcast_to(np.asarray(data["f"] if f is None else f), (K,) + tuple(data["f"].shape))
+    ws = np.broadcast_to(np.asarray(data["weight"] if weight is None else weight), fs.shape)
+    cl, _, _ = unc.incidence_clusters(data["wi"])
+    counts = unc.bootstrap_weights(cl, (ws > 0).any(axis=(0, 2)), n_boot, seed)  # (n_boot, N)
+    mult = jnp.asarray(np.sqrt(counts)[:, :, None], dt)
+
+    def run(zs, fs, ws, mult, data):
+        def one(z, f, w):
+            d = dict(data, f=f, weight=w)
+            z, _, _, ok = solve_z(problem, z, d, **solve_kw)
+            return problem.space.x_from_z(z), ok
+
+        return jax.vmap(lambda z, f, w: jax.vmap(lambda m: one(z, f, w * m))(mult))(zs, fs, ws)
+
+    xs, ok = jax.jit(run)(jnp.asarray(zs, dt), jnp.asarray(fs, dt), jnp.asarray(ws, dt), mult, data)
+    return np.asarray(xs, np.float64), np.asarray(ok)
+
+
+__all__ = ["fit", "solve_z", "bootstrap_refits", "SOLVERS"]

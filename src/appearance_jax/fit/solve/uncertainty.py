@@ -1,0 +1,305 @@
+"""Uncertainties of a fit that stay honest under misfit and correlated residuals, and degeneracies.
+
+Three estimates of the covariance of the fitted (physical) parameters x*, all from the Jacobian
+J of the weighted residual vector r at the optimum (m valid residuals, p parameters,
+"bread" B = (J^T J)^-1):
+
+``iid``
+    Cov = s^2 B with s^2 = r^T r / (m - p) (or 1 when the table carries sigma). Exact when
+    every residual is an independent measurement error of the stated size and the model is
+    right; far too small otherwise (a MERL table has ~116k strongly correlated values).
+``hc1``
+    Huber-White sandwich over single entries: Cov = m / (m - p) B (sum_e s_e s_e^T) B with
+    the per-entry score s_e = J_e^T r_e (White 1980, MacKinnon & White 1985 "HC1"). Honest
+    under misfit and heteroscedastic residuals, still blind to correlation between entries.
+``cluster``
+    Cluster-robust sandwich (Liang & Zeger 1986; Cameron & Miller 2015 "CR1"):
+    Cov = c B (sum_g S_g S_g^T) B, S_g = sum over the entries of cluster g of s_e,
+    c = G / (G - 1) (m - 1) / (m - p). Clusters are the table's **incidence directions**
+    (rows with the same wi; :func:`incidence_clusters`): residuals of one incidence share
+    the lamp, the sample's placement and the model's misfit along theta_o, and are strongly
+    correlated; different incidences are treated as independent. The estimate has about
+    G - 1 degrees of freedom, so it needs many incidences (:func:`min_clusters`).
+
+A fourth, ``bootstrap``, refits the table B times with incidence blocks resampled with
+replacement (:func:`bootstrap_weights`: multiplicity weights, so every replicate has the
+table's shapes and all of them run as one vmapped solve from the optimum) and reports the
+standard deviation and percentile intervals of the replicates (:func:`bootstrap_summary`).
+
+The default sigma of a :class:`~appearance_jax.fit.solve.FitResult` (:func:`default_method`)
+is the cluster sandwich when the table has at least :func:`min_clusters` incidence
+directions, else the entry sandwich HC1 (with a warning), and never less than the iid sigma:
+sigma = sqrt(max(diag Cov_iid, diag Cov_method)). The floor guards against the sandwich's own
+sampling noise (it underestimates in small samples); when the model fits and the noise is
+independent both agree and the iid estimate is the efficient one.
+
+Degeneracies (:func:`degeneracies`): each parameter is scaled by its magnitude, clipped to
+[1 %, 100 %] of its declared range (u = x / scale; a bounded range such as eta in [0, 20] is far
+wider than what "resolved" means for eta = 1.5). A unit direction v in u is **unresolved** when
+the data cannot tell a move of ``FLAT_FRACTION`` (half) of the parameters' scale along v from
+noise: the loss rises by delta^2 lambda_v for a step delta and by one noise unit s^2 at the
+1-sigma contour, so v is flat when its sigma, sqrt(v^T Cov_u v), exceeds FLAT_FRACTION (with the
+iid covariance this is the eigenvalue rule lambda_v FLAT_FRACTION^2 < s^2 of the scaled J^T J;
+with the sandwich it uses the honest noise level instead of s^2). The unresolved directions are
+the eigenvectors of the scaled covariances (iid and the default method) with an eigenvalue above
+FLAT_FRACTION^2; every parameter with a component above 0.3 in one belongs to its group.
+A group also takes in every parameter correlated with a member by more than ``CORR`` (0.95).
+Directions with an eigenvalue of the column-normalised J^T J below a fraction of the largest
+(:func:`numerical_tol`: 1e3 machine epsilons) are exactly flat (the data do not depend on them
+at all); their parameters get sigma = NaN. Parameters on a bound are held there (not part of
+any group).
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+FLAT_FRACTION = 0.5  # a direction whose 1-sigma exceeds this fraction of the parameters' scale is unresolved
+MEMBER = 0.3  # a parameter belongs to a flat direction when its component exceeds this
+CORR = 0.95  # ... or when it is correlated with a member by more than this
+THETA_BIN_DEG = 3.0  # scattered incidences (e.g. the MERL grid) are clustered by theta_i in bins this wide
+KNOWN = ("eta", "k")  # fields usually known from the material (a coat's or a metal's index)
+METHODS = ("iid", "hc1", "cluster", "bootstrap")
+DESCRIPTION = {
+    "iid": "s^2 (J^T J)^-1: every value an independent measurement",
+    "hc1": "Huber-White sandwich over single entries (HC1)",
+    "cluster": "cluster-robust sandwich (CR1), clusters = incidence directions",
+    "bootstrap": "block bootstrap over incidence directions (std of refits)",
+}
+
+
+def numerical_tol(dtype) -> float:
+    """Eigenvalue ratio of the column-normalised J^T J below which a direction is exactly flat."""
+    return float(1e3 * jnp.finfo(dtype).eps)
+
+
+def min_clusters(p: int) -> int:
+    """Incidence directions needed for the cluster sandwich with p parameters: max(10, 2 p + 1).
+
+    Its meat has rank <= G - 1 (the scores sum to 0 at the optimum) and roughly G - p degrees of
+    freedom; below this the relative error of its sigma exceeds ~1 / sqrt(2 (p + 1)).
+    """
+    return max(10, 2 * p + 1)
+
+
+def incidence_clusters(wi) -> tuple[np.ndarray, int, str]:
+    """(cluster index per row (N,), number of clusters G, what a cluster is).
+
+    ``wi`` is the incident direction of each row (a Vec3 or anything with x, y, z). Rows whose
+    wi agree to 1e-6 share a cluster. When most incidences are unique (scattered angle lists,
+    the MERL half/difference grid: a cluster would be a single row), rows are clustered by
+    theta_i in bins of ``THETA_BIN_DEG`` degrees instead.
+    """
+    xyz = np.stack([np.asarray(getattr(wi, c), np.float64) for c in "xyz"], axis=-1)
+    _, idx = np.unique(np.round(xyz / 1e-6).astype(np.int64), axis=0, return_inverse=True)
+    idx = idx.ravel()
+    n = xyz.shape[0]
+    g = int(idx.max()) + 1 if n else 0
+    if n and g > n / 2:
+        theta = np.degrees(np.arccos(np.clip(xyz[:, 2], -1.0, 1.0)))
+        _, idx = np.unique(np.floor(theta / THETA_BIN_DEG).astype(np.int64), return_inverse=True)
+        return idx.ravel(), int(idx.max()) + 1, f"theta_i bins of {THETA_BIN_DEG:g} deg"
+    return idx, g, "incidence direction"
+
+
+def off_bound(space, x, rel: float = 1e-3):
+    """(p,) bool, traceable: the entry is not within ``rel`` of a finite bound (as
+    :meth:`~appearance_jax.fit.solve.transforms.ParamSpace.at_bound`)."""
+    specs = [f.spec for f in space.fields for _ in range(f.size)]
+    lo = jnp.array([s.lo for s in specs], x.dtype)
+    hi = jnp.array([s.hi for s in specs], x.dtype)
+    box = jnp.isfinite(lo) & jnp.isfinite(hi)
+    scale = jnp.where(box, hi - lo, jnp.maximum(jnp.abs(x), 1e-12))
+    near = (jnp.isfinite(lo) & (x - lo <= rel * scale)) | (jnp.isfinite(hi) & (hi - x <= rel * scale))
+    return ~near
+
+
+def covariances(problem, x, data, cluster, n_clusters: int) -> dict:
+    """The iid, HC1 and cluster covariances at physical x, and the numerically flat directions.
+
+    Traceable (vmap it over a batch). ``cluster`` (N,) int: each row's cluster, ``n_clusters``
+    static. A parameter on a bound is held there (an active constraint): its Jacobian column is
+    dropped, so the others' covariances are conditional on it and its own rows are 0. Returns a dict of arrays: ``iid``, ``hc1``, ``cluster`` (p, p) (pseudo-inverse
+    bread: exactly flat directions projected out, see ``flat``), ``lam`` eigenvalues of the
+    column-normalised J^T J relative to the largest, ``flat`` (p,) bool: the parameter has a
+    component > ``MEMBER`` in an exactly flat direction, ``s2`` the iid residual variance,
+    ``m`` valid residuals and ``g`` clusters with a valid residual.
+    """
+    J = jax.jacfwd(problem.residuals_x)(x, data)
+    J = J * off_bound(problem.space, x)[None, :]
+    r = problem.residuals_x(x, data)
+    valid = (data["weight"] > 0).ravel()
+    m = jnp.sum(valid)
+    p = J.shape[1]
+    d = jnp.linalg.norm(J, axis=0)
+    d = jnp.where(d > 0, d, 1.0)
+    lam, vec = jnp.linalg.eigh((J / d).T @ (J / d))
+    big = jnp.maximum(lam[-1], jnp.finfo(lam.dtype).tiny)
+    ok = lam > numerical_tol(lam.dtype) * big
+    bread = ((vec * jnp.where(ok, 1.0 / jnp.where(ok, lam, 1.0), 0.0)) @ vec.T) / jnp.outer(d, d)
+    dof = jnp.maximum(m - p, 1)
+    s2 = jnp.asarray(1.0, r.dtype) if problem.absolute_sigma else (r @ r) / dof
+    scores = J * r[:, None]  # (m_all, p); masked entries have r = 0 and J = 0
+    meat_e = scores.T @ scores * (m / dof)
+    n_bands = data["weight"].shape[-1]
+    entry_cluster = jnp.repeat(jnp.asarray(cluster), n_bands)
+    S = jax.ops.segment_sum(scores, entry_cluster, num_segments=n_clusters)
+    g = jnp.sum(jax.ops.segment_sum(valid.astype(r.dtype), entry_cluster, num_segments=n_clusters) > 0)
+    c = g / jnp.maximum(g - 1, 1) * (m - 1) / dof
+    meat_c = S.T @ S * c
+    flat = jnp.any((jnp.abs(vec) > MEMBER) & ~ok[None, :], axis=1) & off_bound(problem.space, x)
+    return dict(iid=bread * s2, hc1=bread @ meat_e @ bread, cluster=bread @ meat_c @ bread, lam=lam / big,
+                flat=flat, s2=s2, m=m, g=g)
+
+
+def default_method(n_clusters, p: int) -> str:
+    """``"cluster"`` with at least :func:`min_clusters` (p) incidence clusters, else ``"hc1"``."""
+    return "cluster" if int(n_clusters) >= min_clusters(p) else "hc1"
+
+
+def default_sigma(cov_iid, cov_method) -> np.ndarray:
+    """sqrt(max(diag Cov_iid, diag Cov_method)) (numpy; leading batch axes allowed)."""
+    a = np.diagonal(np.asarray(cov_iid, np.float64), axis1=-2, axis2=-1)
+    b = np.diagonal(np.asarray(cov_method, np.float64), axis1=-2, axis2=-1)
+    return np.sqrt(np.maximum(np.abs(a), np.abs(b)))
+
+
+def scales(space, x) -> np.ndarray:
+    """Scale of each free entry for the degeneracy rule: |x| clipped to [1 %, 100 %] of the range
+    (max(|x|, 1e-12) for an unbounded field). Numpy; leading batch axes allowed."""
+    x = np.asarray(x, np.float64)
+    specs = [f.spec for f in space.fields for _ in range(f.size)]
+    width = np.array([s.hi - s.lo for s in specs], np.float64)
+    a = np.maximum(np.abs(x), 1e-12)
+    return np.where(np.isfinite(width), np.clip(a, 0.01 * width, width), a)
+
+
+def unresolved(space, x, covs) -> tuple[np.ndarray, np.ndarray]:
+    """(sigma along each unresolved eigen-direction, their eigenvectors) in scaled parameters.
+
+    ``covs``: covariances (p, p) of one fit (iid and the default method). Returns a (k,) array
+    of sigmas in units of the parameters' :func:`scales` (largest first) and (p, k) unit
+    eigenvectors, for the directions whose sigma exceeds ``FLAT_FRACTION``.
+    """
+    R = scales(space, x)
+    sig, vecs = [], []
+    for cov in covs:
+        cu = np.asarray(cov, np.float64) / np.outer(R, R)
+        if not np.all(np.isfinite(cu)):
+            continue
+        w, v = np.linalg.eigh(0.5 * (cu + cu.T))
+        for j in np.argsort(w)[::-1]:
+            if w[j] <= FLAT_FRACTION ** 2:
+                break
+            sig.append(math.sqrt(w[j]))
+            vecs.append(v[:, j])
+    return np.array(sig), (np.stack(vecs, axis=1) if vecs else np.zeros((len(R), 0)))
+
+
+def flat_members(space, x, covs) -> np.ndarray:
+    """(p,) bool: the parameter belongs to an unresolved direction (:func:`unresolved`)."""
+    _, v = unresolved(space, x, covs)
+    return np.any(np.abs(v) > MEMBER, axis=1) if v.size else np.zeros(len(np.atleast_1d(x)), bool)
+
+
+def _suggest(labels, members, comps) -> str:
+    """What to fix in a degenerate group: a usually-known field (eta, k) if one is in it, else the
+    member most aligned with the flat direction."""
+    fields = [lab.partition("[")[0] for lab in members]
+    known = [f for f in KNOWN if f in fields]
+    if known:
+        return (f"fix {' and '.join(known)} (a coat's or metal's refractive index is usually known), "
+                "e.g. fix={" + ", ".join(f"{k!r}: ..." for k in known) + "}")
+    lead = members[int(np.argmax(np.abs(comps)))]
+    return f"fix {lead.partition('[')[0]} or constrain the group with other measurements"
+
+
+def degeneracies(space, x, labels, covs, exact_flat, bound) -> list[dict]:
+    """Groups of parameters that move together without changing the fit, with a suggestion.
+
+    ``covs`` (the iid and the default covariance), ``exact_flat`` (p,) bool (numerically flat,
+    :func:`covariances`), ``bound`` (p,) bool. Each group: ``parameters`` (labels),
+    ``direction`` (components in scaled units), ``sigma_scaled`` (its 1-sigma in units of the
+    parameters' :func:`scales`, None when exactly flat), ``correlated`` (the largest |correlation| among
+    the members, None if unknown), ``suggestion`` and ``text`` (one line for the report).
+    """
+    labels = list(labels)
+    ok = ~np.asarray(bound, bool)
+    groups, seen = [], set()
+    sig, vecs = unresolved(space, x, covs)
+    cands = [(s, vecs[:, j]) for j, s in enumerate(sig)]
+    if np.any(exact_flat):
+        cands.insert(0, (None, np.asarray(exact_flat, np.float64)))
+    cov = np.asarray(covs[-1], np.float64)
+    sd = np.sqrt(np.abs(np.diag(cov)))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr_all = np.abs(cov / np.outer(sd, sd))
+    for s, v in cands:
+        idx = [i for i in range(len(labels)) if abs(v[i]) > MEMBER and ok[i]] if s is not None else \
+            [i for i in range(len(labels)) if v[i] > 0 and ok[i]]
+        if s is not None and idx:
+            near = np.nan_to_num(corr_all[idx]).max(axis=0) > CORR
+            idx = sorted(set(idx) | {i for i in range(len(labels)) if near[i] and ok[i]})
+        key = tuple(idx)
+        if not idx or key in seen:
+            continue
+        seen.add(key)
+        members = [labels[i] for i in idx]
+        corr = None
+        if len(idx) > 1 and s is not None:
+            with np.errstate(invalid="ignore", divide="ignore"):
+                c = cov[np.ix_(idx, idx)] / np.outer(sd[idx], sd[idx])
+            off = np.abs(c[~np.eye(len(idx), dtype=bool)])
+            corr = float(np.nanmax(off)) if np.isfinite(off).any() else None
+        how = ("the data do not depend on them" if s is None else
+               f"their combined direction is unresolved: 1 sigma = {s:.2g} x their magnitudes")
+        together = "move together" if len(idx) > 1 else "is undetermined"
+        corr_txt = f", |corr| up to {corr:.2f}" if corr is not None else ""
+        sugg = _suggest(labels, members, np.abs(v[idx]) * (np.abs(v[idx]) > MEMBER))
+        groups.append(dict(parameters=members, direction=[float(v[i]) for i in idx],
+                           sigma_scaled=None if s is None else float(s), correlated=corr, suggestion=sugg,
+                           text=f"{', '.join(members)} {together} ({how}{corr_txt}); {sugg}"))
+    return groups
+
+
+def bootstrap_weights(cluster, valid_rows, n_boot: int, seed: int = 0) -> np.ndarray:
+    """(n_boot, N) multiplicities of the rows: incidence clusters resampled with replacement.
+
+    Each replicate draws G clusters (those with a valid row) uniformly with replacement
+    (``numpy.random.default_rng(seed)``); a row's multiplicity is its cluster's count. The sum
+    of squared residuals of a replicate weights each entry by it (so the fit's weight, a
+    square root, is multiplied by sqrt(count)).
+    """
+    if not isinstance(n_boot, (int, np.integer)) or isinstance(n_boot, bool) or n_boot < 2:
+        raise ValueError(f"bootstrap = {n_boot!r}: the number of replicates must be an int >= 2")
+    cluster = np.asarray(cluster)
+    live = np.unique(cluster[np.asarray(valid_rows, bool)])
+    rng = np.random.default_rng(seed)
+    draws = rng.integers(0, live.size, size=(n_boot, live.size))
+    counts = np.zeros((n_boot, int(cluster.max()) + 1))
+    for b in range(n_boot):
+        np.add.at(counts[b], live[draws[b]], 1.0)
+    return counts[:, cluster]
+
+
+def bootstrap_summary(xs, ok) -> dict:
+    """Standard deviation and percentile intervals (68.3 %, 95 %) of converged replicates (B, p)."""
+    xs = np.asarray(xs, np.float64)
+    good = np.asarray(ok, bool) & np.all(np.isfinite(xs), axis=1)
+    xg = xs[good]
+    if xg.shape[0] < 2:
+        nan = np.full(xs.shape[1], np.nan)
+        return dict(sigma=nan, interval68=np.stack([nan, nan], 1), interval95=np.stack([nan, nan], 1),
+                    replicates=int(xs.shape[0]), failed=int((~good).sum()))
+    q = np.percentile(xg, [15.865, 84.135, 2.5, 97.5], axis=0)
+    return dict(sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T,
+                replicates=int(xs.shape[0]), failed=int((~good).sum()))
+
+
+__all__ = ["covariances", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
+           "degeneracies", "flat_members", "unresolved", "scales", "bootstrap_weights", "bootstrap_summary",
+           "METHODS", "DESCRIPTION", "FLAT_FRACTION"]

@@ -1,0 +1,168 @@
+"""Honest uncertainties: coverage under correlated residuals, the bootstrap, degeneracies, bounds.
+
+The synthetic "measurements" carry an error field that is smooth along theta_o within each
+incidence direction and independent between incidences: per incidence i and band b,
+g = a0 + a1 P1(u) + a2 P2(u) (u = theta_o / 80 deg, P Legendre polynomials, a ~ N(0, 1)),
+data = f_true (1 + EPS g) (1 + NOISE n), n ~ N(0, 1) iid. The field has zero mean over
+realisations, so the truth is the parameter that generated f_true (to O(EPS^2) for a
+non-linear model, far below sigma). Within an incidence the ~33 residuals of a band are
+strongly correlated, which is what makes the iid sigma far too small; the cluster-robust
+sandwich, clustered by incidence direction, is built for exactly this.
+"""
+
+import json
+
+import numpy as np
+import pytest
+
+from appearance_jax import registry
+from appearance_jax.fit.report.records import write_params_json
+from appearance_jax.fit.solve import fit
+from appearance_jax.fit.solve.batch import fit_batch
+from appearance_jax.fit.solve.uncertainty import bootstrap_weights, incidence_clusters
+from appearance_jax.fit.tables.grids import gonio_angles, in_plane_angles
+from appearance_jax.fit.tables.table import Table
+
+EPS, NOISE = 0.04, 0.004
+TRUTH = dict(alpha=0.2, specular_reflectance=(0.9, 0.8, 0.7))
+FIX = ["eta", "k"]
+COVER = 0.6827  # P(|z| < 1)
+
+
+def _table():
+    """26 incidences (0..75 deg step 3) x 33 signed theta_o: many clusters, ~2600 entries."""
+    ti, to = in_plane_angles(np.arange(0, 76, 3), np.arange(-80, 81, 5))
+    return Table.in_plane(ti, to, np.ones((ti.size, 3)), source="correlated in-plane")
+
+
+def _realisations(table, f, k, seed):
+    rng = np.random.default_rng(seed)
+    inc = np.unique(table.theta_i, return_inverse=True)[1].ravel()
+    u = table.signed_theta_o() / np.deg2rad(80.0)
+    basis = np.stack([np.ones_like(u), u, 1.5 * u ** 2 - 0.5], axis=-1)  # (N, 3) Legendre P0..P2
+    a = rng.standard_normal((k, inc.max() + 1, 3, f.shape[1]))  # (K, incidences, order, bands)
+    g = np.einsum("nl,knlb->knb", basis, a[:, inc])
+    return f * (1 + EPS * g) * (1 + NOISE * rng.standard_normal((k,) + f.shape))
+
+
+def _model_values(model, params, table):
+    wi, wo = table.directions()
+    return np.broadcast_to(np.asarray(model.eval(params, wi, wo), np.float64), table.values.shape)
+
+
+def test_clusters_are_incidence_directions():
+    t = _table()
+    cl, g, what = incidence_clusters(t.directions()[0])
+    assert g == 26 and what == "incidence direction"
+    assert all(np.unique(t.theta_i[cl == c]).size == 1 for c in range(g))
+    # scattered incidences (every row its own wi) fall back to theta_i bins
+    rng = np.random.default_rng(0)
+    s = Table(rng.uniform(0, 1.4, 200), rng.uniform(0, 6, 200), rng.uniform(0, 1.4, 200), rng.uniform(0, 6, 200),
+              np.ones((200, 1)), np.ones((200, 1), bool), bands=("Y",))
+    cl, g, what = incidence_clusters(s.directions()[0])
+    assert what.startswith("theta_i bins") and g <= 28 and g < 200
+
+
+def test_honest_sigma_covers_the_truth_and_iid_does_not():
+    """K = 64 realisations in one fit_batch: pooled 1-sigma coverage of the 4 parameters.
+
+    The pooled coverage averages 4 correlated indicators per realisation, so its variance is at
+    most that of one indicator: |coverage - 0.683| <= 3 sqrt(0.683 x 0.317 / K) (= 0.17) is a
+    3-sigma band. The iid sigma must under-cover clearly (< 0.4; with ~33 correlated values
+    per incidence it is too small by a factor ~4, coverage ~0.2).
+    """
+    model = registry.get("rough_conductor")
+    truth = model.Params(**TRUTH)
+    table = _table()
+    f = _model_values(model, truth, table)
+    K = 64
+    res = fit_batch(model, table, _realisations(table, f, K, seed=19), init=model.Params(alpha=0.3), fix=FIX)
+    assert res.converged.all() and res.sigma_method == "cluster" and res.n_clusters == 26
+    t = np.array([0.2, 0.9, 0.8, 0.7])
+    err = np.abs(res.x - t)
+    cover = np.mean(err < res.sigma)
+    cover_iid = np.mean(err < res.sigma_iid)
+    tol = 3 * np.sqrt(COVER * (1 - COVER) / K)
+    assert abs(cover - COVER) <= tol, (cover, cover_iid)
+    assert cover_iid < 0.4, (cover, cover_iid)
+    assert np.all(res.sigma >= res.sigma_iid * (1 - 1e-12))  # the default never drops below iid
+    # the batch item is the same as a single fit of that table
+    one = res.item(3)
+    np.testing.assert_allclose(one.sigma, res.sigma[3], rtol=1e-6)
+    np.testing.assert_allclose(one.sigma_sandwich, res.sigma_sandwich[3], rtol=1e-6)
+
+
+def test_bootstrap_agrees_with_the_sandwich_and_is_reproducible():
+    """B = 48 block-bootstrap refits vs the cluster sandwich on one correlated table.
+
+    Both estimate the same spread from the same 26 incidence blocks; the bootstrap sigma has a
+    resampling error of 1 / sqrt(2 (B - 1)) = 0.10 relative, and the two differ by the CR1
+    factor and bootstrap bias of O(p / G) ~ 0.15: the ratio must be 1 within 3.5 x 0.10 + 0.15.
+    """
+    model = registry.get("rough_conductor")
+    table = _table()
+    f = _model_values(model, model.Params(**TRUTH), table)
+    values = _realisations(table, f, 1, seed=5)[0]
+    B = 48
+    res = fit(model, table.replace(values=values), init=model.Params(alpha=0.3), fix=FIX, bootstrap=B,
+              bootstrap_seed=3)
+    assert res.bootstrap["replicates"] == B and res.bootstrap["failed"] == 0
+    ratio = res.sigma_bootstrap / res.sigma_sandwich
+    assert np.all(np.abs(ratio - 1) < 3.5 / np.sqrt(2 * (B - 1)) + 0.15), ratio
+    lo, hi = res.bootstrap["interval68"].T
+    assert np.all(lo < res.x) and np.all(res.x < hi)
+    d = res.to_dict()["parameters"]["alpha"]
+    assert d["sigma_bootstrap"] == pytest.approx(res.sigma_bootstrap[0]) and len(d["bootstrap_interval95"]) == 2
+    # the same seed gives the same replicates
+    w1, w2 = (bootstrap_weights(np.arange(5).repeat(3), np.ones(15, bool), 4, seed=3) for _ in range(2))
+    np.testing.assert_array_equal(w1, w2)
+    assert np.all(w1.reshape(4, 5, 3).sum(axis=1)[:, 0] == 5)  # G draws per replicate
+    with pytest.raises(ValueError, match="bootstrap = 1"):
+        fit(model, table.replace(values=values), fix=FIX, bootstrap=1)
+
+
+def test_flat_valley_is_named_with_a_suggestion():
+    """A conductor seen over a narrow range of angles: eta, k and the scale trade off (the
+    Fresnel factor barely changes between 0 and 30 deg), so the fit cannot resolve them."""
+    model = registry.get("rough_conductor")
+    truth = model.Params(alpha=0.3, eta=1.5, k=3.0, specular_reflectance=0.7)
+    ti, to = in_plane_angles(np.arange(0, 31, 2), np.arange(-30, 31, 3))
+    table = Table.in_plane(ti, to, np.ones((ti.size, 1)), bands=("Y",))
+    f = _model_values(model, truth, table)
+    noisy = f * (1 + 0.02 * np.random.default_rng(2).standard_normal(f.shape))
+    res = fit(model, table.replace(values=noisy), init=truth)
+    assert res.degeneracies, res.summary()
+    group = res.degeneracies[0]
+    assert {"eta[Y]", "k[Y]", "specular_reflectance[Y]"} <= set(group["parameters"]), group
+    assert "alpha" not in group["parameters"] and group["correlated"] > 0.95
+    assert "fix eta and k" in group["suggestion"]
+    assert any(w.startswith("degenerate:") for w in res.warnings)
+    assert set(group["parameters"]) <= set(res.poorly_determined)
+    # a well-posed fit of the same table (index known) flags nothing
+    ok = fit(model, table.replace(values=noisy), init=truth, fix=["eta", "k"])
+    assert not ok.degeneracies and not ok.poorly_determined, ok.summary()
+
+
+def test_parameters_at_bounds_get_no_sigma_and_a_warning(tmp_path):
+    """Lambert with two bands of zero reflectance: two parameters end on the bound 0. A gonio
+    table with 5 incidences has too few clusters for the cluster sandwich (HC1 + a warning)."""
+    ti, pi_, to, po = gonio_angles([0, 20, 40, 60, 75], np.arange(0, 81, 10), np.arange(0, 181, 30))
+    rho = np.array([0.5, 0.0, 0.0])
+    v = np.broadcast_to(rho / np.pi, (ti.size, 3)) * (1 + 0.01 * np.random.default_rng(1).standard_normal((ti.size, 3)))
+    t = Table(ti, pi_, to, po, np.abs(v), np.ones((ti.size, 3), bool), source="two dark bands")
+    res = fit("lambert", t)
+    assert set(res.at_bound) == {"reflectance[G]", "reflectance[B]"}
+    assert np.isnan(res.sigma[1:]).all() and np.isfinite(res.sigma[0])
+    assert res.sigma_method == "hc1" and res.n_clusters == 5
+    assert any("2 parameters ended at a bound" in w for w in res.warnings)
+    assert any("only 5 incidence directions" in w for w in res.warnings)
+    text = res.summary()
+    assert "reflectance[G] = " in text and "(at bound)" in text and "warning:" in text
+    assert "+-" not in text.split("reflectance[G]")[1].splitlines()[0]
+    d = write_params_json(res, tmp_path / "params.json")
+    back = json.loads((tmp_path / "params.json").read_text())
+    g = back["parameters"]["reflectance[G]"]
+    assert g["sigma"] is None and g["sigma_iid"] is None and g["sigma_note"].startswith("at bound")
+    assert back["uncertainty"]["method"] == "hc1" and back["warnings"] == res.warnings
+    assert back["correlation"]["labels"] == list(res.labels) and len(back["correlation"]["matrix"]) == 3
+    assert back["correlation"]["matrix"][0][0] == pytest.approx(1.0) and d["degeneracies"] == []
