@@ -86,7 +86,7 @@ def _hatch(ax, xe, ye, filled_img):
         pc.set_gid("reciprocity_fill")
 
 
-def maps_figure(result, *, model=None, dpi=100):
+def maps_figure(result, *, model=None, dpi=90):
     """The figure of ``maps.png`` and its one-line description: measured, fitted and residual
     theta_i x signed theta_o maps (see :mod:`~appearance_jax.fit.report`). Returns (Figure, str);
     the caller saves and closes it (:func:`plot_maps` does both)."""
@@ -165,7 +165,7 @@ def _model_only_maps(result, model, p, dpi):
     return fig, desc
 
 
-def plot_maps(result, path, *, model=None, dpi=100) -> str:
+def plot_maps(result, path, *, model=None, dpi=90) -> str:
     """Write ``maps.png`` (:func:`maps_figure`); returns its one-line description (for params.json)."""
     fig, desc = maps_figure(result, model=model, dpi=dpi)
     _save(fig, path, dpi)
@@ -209,7 +209,7 @@ def _scatter_axes(ax, t, result, lum=False):
         ax.legend(fontsize=8, markerscale=3)
 
 
-def scatter_figure(result, *, dpi=100):
+def scatter_figure(result, *, dpi=90):
     """The figure of ``scatter.png``: fitted against measured BRDF per band, log-log (a Figure)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5.6, 5.4), dpi=dpi, constrained_layout=True)
@@ -218,7 +218,7 @@ def scatter_figure(result, *, dpi=100):
     return fig
 
 
-def plot_scatter(result, path, *, dpi=100) -> None:
+def plot_scatter(result, path, *, dpi=90) -> None:
     """Write ``scatter.png`` (:func:`scatter_figure`)."""
     _save(scatter_figure(result, dpi=dpi), path, dpi)
 
@@ -265,7 +265,7 @@ def _y_range(curve, pts):
     return max(floor, top * 10.0 ** -POINT_DECADES), top
 
 
-def slices_figure(result, *, model=None, dpi=100):
+def slices_figure(result, *, model=None, dpi=90):
     """The figure of ``slices.png`` and its description: f cos theta_o [1/sr] per channel on a log
     axis against signed theta_o, one panel per theta_i (up to 4), measured in-plane points
     (markers) and the fitted model evaluated densely in-plane (lines), the mirror direction
@@ -338,7 +338,7 @@ def slices_figure(result, *, model=None, dpi=100):
     return fig, desc
 
 
-def plot_slices(result, path, *, model=None, dpi=100) -> str:
+def plot_slices(result, path, *, model=None, dpi=90) -> str:
     """Write ``slices.png`` (:func:`slices_figure`); returns its description."""
     fig, desc = slices_figure(result, model=model, dpi=dpi)
     _save(fig, path, dpi)
