@@ -58,7 +58,7 @@ from ..core.model import as_bands
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.quadrature import gauss_legendre
 from ..core.special import erf
-from ..core.vec import Vec3
+from ..core.vec import as_directions, Vec3
 from . import marschner
 from .sadeghi import colors, lobes, Params, shifts
 
@@ -344,6 +344,7 @@ def dual_scattering_terms(p: Params, dual: DualParams, wi: Vec3, wo: Vec3, n_for
                           multiple: Params | None = None, forward=None, tables: Tables | None = None) -> DualTerms:
     """Validated :func:`dual_scattering_terms_kernel`."""
     _check(p, dual, multiple)
+    wi, wo = as_directions(wi=wi, wo=wo)
     return _terms_jit(p, dual, wi, wo, n_forward, direct_fraction, multiple, forward, tables)
 
 
@@ -353,6 +354,7 @@ def dual_scattering(p: Params, dual: DualParams, wi: Vec3, wo: Vec3, n_forward=0
     hair at depth ``n_forward`` hairs inside a volume (Sadeghi §4.7.2). ``multiple`` is the second
     AFC set that feeds the multiple-scattering part (Sadeghi §4.6.3; None = same as ``p``)."""
     _check(p, dual, multiple)
+    wi, wo = as_directions(wi=wi, wo=wo)
     return _dual_jit(p, dual, wi, wo, n_forward, direct_fraction, multiple, forward, tables)
 
 

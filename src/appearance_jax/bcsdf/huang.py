@@ -89,7 +89,7 @@ from ..core.model import Model, as_bands, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.quadrature import simpson, simpson_mc
 from ..core.rng import is_prng_key, uniforms
-from ..core.vec import Vec3
+from ..core.vec import as_directions, Vec3
 from ..microfacet import distribution as mf
 from ..optics.fresnel import fresnel_dielectric
 from .fiber import (RGB_WAVELENGTHS_NM, arc_element, ellipse_chord, ellipse_normal, ellipse_point, half_width,
@@ -391,6 +391,7 @@ def sample(params, wi, u_or_key, with_pdf=True, pdf_key=None):
     # two jitted stages (the path sampler, then the public pdf), so that a pdf already compiled
     # for these shapes is reused; under a caller's jit both are traced inline
     validate(params, Params)
+    (wi,) = as_directions(wi=wi)
     wo, weight, _, _, _, _, good = _sample_path_jit(params, wi, u_or_key)
     if not with_pdf:
         return wo, weight, None

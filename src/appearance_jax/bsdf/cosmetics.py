@@ -60,7 +60,7 @@ import numpy as np
 
 from ..core.model import Model, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
-from ..core.vec import Vec3
+from ..core.vec import as_directions, Vec3
 from ..layered import medium
 from ..layered.random_walk import Bottom, walk
 from ..layered.random_walk import albedo as albedo_walk
@@ -155,6 +155,7 @@ def eval_stack(layers: Sequence[Params], wi: Vec3, wo: Vec3, key=None, *, base=N
         if model.sample is None:
             raise ValueError(f"base model {model.name!r} has no sampler; the random walk needs one")
         bottom = Bottom(model, bp)
+    wi, wo = as_directions(wi=wi, wo=wo)
     top = layers[0]  # layered.random_walk.walk is jitted: one compilation per base model and settings
     return _walk(layers, bottom, wi, wo, key, top.n_samples, top.max_bounces, top.azimuth)
 

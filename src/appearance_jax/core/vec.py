@@ -179,6 +179,15 @@ def as_direction(name: str, w, check: bool = True) -> Vec3:
     return v
 
 
+def as_directions(**named) -> tuple:
+    """:func:`as_direction` for several arguments with one check for all of them, for public
+    functions outside :func:`~appearance_jax.core.model.boundary`:
+    ``wi, wo = as_directions(wi=wi, wo=wo)``."""
+    out = {n: as_direction(n, w, check=False) for n, w in named.items()}
+    check_directions(out)
+    return tuple(out.values())
+
+
 # below this many components in all, directions are checked on the host: a device reduction
 # costs a dispatch and a synchronisation (~50 us), numpy a few us on a handful of values
 _HOST_CHECK_MAX = 4096
