@@ -89,7 +89,8 @@ def main(argv=None):
         print(f"| bootstrap std, B = {a.replicates} | {n} | {np.mean(e < s):.3f} | {se:.3f} | {np.median(s[:, 0]):.3g} |")
         inside = np.mean((lo <= TRUE_X) & (TRUE_X <= hi))
         print(f"| bootstrap 68 % percentile interval | {n} | {inside:.3f} | {se:.3f} | |")
-        print(f"bootstrap refits that did not converge: {int(boot['failed'].sum())} of {kb * a.replicates}")
+        print(f"bootstrap refits out of steps: {int(boot['not_converged'].sum())}, non-finite: "
+              f"{int(boot['failed'].sum())}, of {kb * a.replicates}")
 
 
 CASES = (  # (title, model, table, fix): proxies on an in-plane grid with 26 incidences (theta_i step 3 deg)

@@ -80,7 +80,7 @@ class BatchFitResult:
         vmapped solve.
 
         Returns {"sigma": (k, p), "interval68", "interval95": (k, p, 2), "replicates": n_boot,
-        "failed": (k,) refits that did not converge} (:func:`~.uncertainty.bootstrap_summary`).
+        "failed", "not_converged": (k,) counts of refits} (:func:`~.uncertainty.bootstrap_summary`).
         """
         idx = np.arange(len(self)) if items is None else np.asarray(items, int)
         kw = dict(solver=self.solver, **self._solve_kw)
@@ -90,7 +90,8 @@ class BatchFitResult:
         return dict(sigma=np.stack([d["sigma"] for d in items]),
                     interval68=np.stack([d["interval68"] for d in items]),
                     interval95=np.stack([d["interval95"] for d in items]), replicates=int(n_boot),
-                    failed=np.array([d["failed"] for d in items]), seed=int(seed))
+                    failed=np.array([d["failed"] for d in items]),
+                    not_converged=np.array([d["not_converged"] for d in items]), seed=int(seed))
 
 
 def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, fix=None, metric: str = "l2",

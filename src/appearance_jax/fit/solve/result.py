@@ -80,7 +80,7 @@ class FitResult:
     bootstrap: dict | None = None  # replicates, failed, seed, interval68, interval95 (p, 2)
     cov_iid: np.ndarray | None = None
     n_clusters: int = 0
-    clusters: str = ""  # what a cluster is ("incidence direction", "theta_i bins of 3 deg")
+    clusters: str = ""  # what a cluster is ("one per incidence direction", "theta_i bins of 3 deg")
     degeneracies: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
 
@@ -153,7 +153,8 @@ class FitResult:
                     rec[f"bootstrap_{k}"] = [num(v) for v in self.bootstrap[k][i]]
             return rec
 
-        boot = None if self.bootstrap is None else {k: self.bootstrap[k] for k in ("replicates", "failed", "seed")}
+        boot = None if self.bootstrap is None else {k: self.bootstrap.get(k) for k in ("replicates", "failed",
+                                                                                   "not_converged", "seed")}
         return dict(
             model=self.model, solver=self.solver, metric=self.metric, converged=bool(self.converged),
             iterations=int(self.iterations), wall_time_s=float(self.wall_time),
@@ -251,9 +252,10 @@ def _warnings(res: FitResult, s2: float, absolute: bool) -> list:
     if absolute and s2 > 4.0:
         out.append(f"the residuals are {np.sqrt(s2):.3g} x the table's sigma (reduced chi-square {s2:.3g}): "
                    "the model does not fit within the stated uncertainties")
-    if res.bootstrap is not None and res.bootstrap["failed"]:
-        out.append(f"bootstrap: {res.bootstrap['failed']} of {res.bootstrap['replicates']} refits did not converge "
-                   "and were left out")
+    b = res.bootstrap
+    if b is not None and (b["failed"] or b.get("not_converged")):
+        out.append(f"bootstrap: of {b['replicates']} refits {b.get('not_converged', 0)} ran out of steps (kept) and "
+                   f"{b['failed']} gave non-finite values (left out)")
     return out
 
 
@@ -293,6 +295,8 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
         n_clusters=int(out["g"]), clusters=what, bootstrap=bootstrap,
         sigma_bootstrap=None if bootstrap is None else np.asarray(bootstrap["sigma"], np.float64))
     res.degeneracies = unc.degeneracies(sp, x, sp.labels, [out["iid"], out[method]], exact, bound)
+    grouped = {lab for g in res.degeneracies for lab in g["parameters"]}
+    res.poorly_determined = tuple(lab for lab, b in zip(sp.labels, flat) if b or lab in grouped)
     res.warnings = _warnings(res, float(out["s2"]), bool(problem.absolute_sigma))
     return res
 

@@ -67,7 +67,7 @@ METHODS = ("iid", "hc1", "cluster", "bootstrap")
 DESCRIPTION = {
     "iid": "s^2 (J^T J)^-1: every value an independent measurement",
     "hc1": "Huber-White sandwich over single entries (HC1)",
-    "cluster": "cluster-robust sandwich (CR1), clusters = incidence directions",
+    "cluster": "cluster-robust sandwich (CR1) over incidence directions",
     "bootstrap": "block bootstrap over incidence directions (std of refits)",
 }
 
@@ -103,7 +103,7 @@ def incidence_clusters(wi) -> tuple[np.ndarray, int, str]:
         theta = np.degrees(np.arccos(np.clip(xyz[:, 2], -1.0, 1.0)))
         _, idx = np.unique(np.floor(theta / THETA_BIN_DEG).astype(np.int64), return_inverse=True)
         return idx.ravel(), int(idx.max()) + 1, f"theta_i bins of {THETA_BIN_DEG:g} deg"
-    return idx, g, "incidence direction"
+    return idx, g, "one per incidence direction"
 
 
 def off_bound(space, x, rel: float = 1e-3):
@@ -229,7 +229,7 @@ def degeneracies(space, x, labels, covs, exact_flat, bound) -> list[dict]:
     """
     labels = list(labels)
     ok = ~np.asarray(bound, bool)
-    groups, seen = [], set()
+    groups, seen = [], []
     sig, vecs = unresolved(space, x, covs)
     cands = [(s, vecs[:, j]) for j, s in enumerate(sig)]
     if np.any(exact_flat):
@@ -244,10 +244,11 @@ def degeneracies(space, x, labels, covs, exact_flat, bound) -> list[dict]:
         if s is not None and idx:
             near = np.nan_to_num(corr_all[idx]).max(axis=0) > CORR
             idx = sorted(set(idx) | {i for i in range(len(labels)) if near[i] and ok[i]})
-        key = tuple(idx)
-        if not idx or key in seen:
-            continue
-        seen.add(key)
+        if not idx or any(set(idx) <= g for g in seen):
+            continue  # an unresolved direction of the iid and of the default covariance: one group
+        keep = [k for k, g in enumerate(seen) if not g <= set(idx)]
+        groups, seen = [groups[k] for k in keep], [seen[k] for k in keep]
+        seen.append(set(idx))
         members = [labels[i] for i in idx]
         corr = None
         if len(idx) > 1 and s is not None:
@@ -287,17 +288,22 @@ def bootstrap_weights(cluster, valid_rows, n_boot: int, seed: int = 0) -> np.nda
 
 
 def bootstrap_summary(xs, ok) -> dict:
-    """Standard deviation and percentile intervals (68.3 %, 95 %) of converged replicates (B, p)."""
+    """Standard deviation and percentile intervals (68.3 %, 95 %) of the replicates x (B, p).
+
+    Every replicate with finite values counts, converged or not (``ok``): a refit that runs out
+    of steps in a flat valley has wandered along it, and leaving it out would hide the valley.
+    ``failed`` counts the non-finite replicates (left out), ``not_converged`` the others.
+    """
     xs = np.asarray(xs, np.float64)
-    good = np.asarray(ok, bool) & np.all(np.isfinite(xs), axis=1)
+    good = np.all(np.isfinite(xs), axis=1)
     xg = xs[good]
+    out = dict(replicates=int(xs.shape[0]), failed=int((~good).sum()),
+               not_converged=int((good & ~np.asarray(ok, bool)).sum()))
     if xg.shape[0] < 2:
         nan = np.full(xs.shape[1], np.nan)
-        return dict(sigma=nan, interval68=np.stack([nan, nan], 1), interval95=np.stack([nan, nan], 1),
-                    replicates=int(xs.shape[0]), failed=int((~good).sum()))
+        return dict(out, sigma=nan, interval68=np.stack([nan, nan], 1), interval95=np.stack([nan, nan], 1))
     q = np.percentile(xg, [15.865, 84.135, 2.5, 97.5], axis=0)
-    return dict(sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T,
-                replicates=int(xs.shape[0]), failed=int((~good).sum()))
+    return dict(out, sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T)
 
 
 __all__ = ["covariances", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
