@@ -156,6 +156,18 @@ def covariances(problem, x, data, cluster, n_clusters: int) -> dict:
                 flat=flat, s2=s2, m=m, g=g)
 
 
+def covariance(problem, x, data):
+    """(iid covariance, eigenvalues, exactly-flat mask) at physical x: traceable.
+
+    The iid estimate of :func:`covariances` alone (no clusters), with NaN in the rows and
+    columns of parameters in an exactly flat direction, for callers that rescale it themselves.
+    """
+    n = data["weight"].shape[0]
+    out = covariances(problem, x, data, jnp.zeros(n, jnp.int32), 1)
+    cov = jnp.where(out["flat"][:, None] | out["flat"][None, :], jnp.nan, out["iid"])
+    return cov, out["lam"], out["flat"]
+
+
 def default_method(n_clusters, p: int) -> str:
     """``"cluster"`` with at least :func:`min_clusters` (p) incidence clusters, else ``"hc1"``."""
     return "cluster" if int(n_clusters) >= min_clusters(p) else "hc1"
@@ -306,6 +318,6 @@ def bootstrap_summary(xs, ok) -> dict:
     return dict(out, sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T)
 
 
-__all__ = ["covariances", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
+__all__ = ["covariances", "covariance", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
            "degeneracies", "flat_members", "unresolved", "scales", "bootstrap_weights", "bootstrap_summary",
            "METHODS", "DESCRIPTION", "FLAT_FRACTION"]
