@@ -120,7 +120,10 @@ def _in_plane_lossless(table: Table) -> bool:
     def unit(theta, phi):
         return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)])
 
-    rebuilt = Table.in_plane(table.theta_i, table.signed_theta_o(), table.values)
+    # the directions Table.in_plane would rebuild (phi_i = 0, phi_o = pi on the forward side);
+    # built directly so that any band count works (a Table needs band names for its values)
+    to = table.signed_theta_o()
+    phi_o = np.where(to >= 0, np.pi, 0.0)
     # compare directions, not angles: the azimuth of a direction along the normal is arbitrary
-    return bool(np.all(np.abs(unit(table.theta_i, table.phi_i) - unit(rebuilt.theta_i, rebuilt.phi_i)) < 1e-9)
-                and np.all(np.abs(unit(table.theta_o, table.phi_o) - unit(rebuilt.theta_o, rebuilt.phi_o)) < 1e-9))
+    return bool(np.all(np.abs(unit(table.theta_i, table.phi_i) - unit(table.theta_i, 0.0 * table.theta_i)) < 1e-9)
+                and np.all(np.abs(unit(table.theta_o, table.phi_o) - unit(np.abs(to), phi_o)) < 1e-9))
