@@ -19,12 +19,15 @@ Files (in ``out_dir``):
     reason they were left out (below horizon, missing value, grazing, no sigma).
 ``maps.png``
     Measured and fitted theta_i x signed theta_o maps (theta_o horizontal, negative on the
-    retro-reflection side; theta_i vertical; black = no sample), as in Fig. 4.4 of Padrón
-    2025: colour = sRGB of f cos theta_o per channel with **one** exposure common to both
-    panels (the 99th percentile of the measured f cos theta_o maps to white), and a third
-    panel with log10(fitted / measured) of the luminance. Spectral tables are shown in
-    linear sRGB (:meth:`Table.to_rgb`), single-band tables in grey.
-    Which samples are drawn:
+    retro-reflection side; theta_i vertical), as in Fig. 4.4 of Padrón 2025. Brightness is
+    linear in log10 of the luminance of f cos theta_o over a range stated in the colour bar
+    (:mod:`~appearance_jax.fit.report.tonemap`: the measured peak down to at most 6 decades
+    below it; dark grey = the bottom of the range, black = no sample), hue and saturation
+    kept; measured and fitted panels share one mapping. A third panel shows
+    log10(fitted / measured) of the luminance with symmetric limits stated in its title. Cells
+    missing at (a, b) but measured at (b, a) are filled by reciprocity and hatched
+    (:func:`~appearance_jax.fit.report.geometry.reciprocity_fill`). Spectral tables are shown
+    in linear sRGB (:meth:`Table.to_rgb`), single-band tables in grey. Which samples are drawn:
 
     - an in-plane table: all its samples;
     - any other table (MERL grid, out-of-plane gonioreflectometer): its **in-plane subset**,
@@ -37,23 +40,27 @@ Files (in ``out_dir``):
     - otherwise: the fitted model rendered densely in-plane (1 degree steps) next to a
       measured-vs-fitted scatter of all valid entries; the title says so.
 ``slices.png``
-    Polar plots of f cos theta_o (per channel, 1/sr) against signed theta_o for up to 4 theta_i
-    values: measured in-plane points (markers) and the fitted model evaluated densely in-plane
-    (lines, :func:`~appearance_jax.core.frame.in_plane_directions`); the incident direction is
-    marked. For a table without in-plane samples only the model is drawn.
+    One Cartesian panel per theta_i (up to 4): f cos theta_o (per channel, 1/sr, log y axis)
+    against signed theta_o; measured in-plane points (markers; squares where filled by
+    reciprocity) and the fitted model evaluated densely in-plane (lines). Every measured point
+    is inside the frame (zeros and points more than 8 decades below the peak are drawn at the
+    floor as triangles and counted); the mirror (theta_o = theta_i, dashed) and
+    retro-reflection (theta_o = -theta_i, dotted) directions are marked. For a table without
+    in-plane samples only the model is drawn.
 ``scatter.png``
     Fitted against measured BRDF per band, log-log, over the fitted entries, with the y = x line.
 
 Figures use matplotlib's Agg backend (no display needed).
 
 Modules: ``records`` (params.json, residuals.csv and which entries were fitted), ``figures``
-(maps, slices, scatter), ``geometry`` (a table's in-plane points and their images) and ``write``
+(maps, slices, scatter; ``*_figure`` return the matplotlib Figure), ``tonemap`` (the maps'
+log mapping), ``geometry`` (a table's in-plane points, their images, the reciprocity fill) and ``write``
 (:func:`write_report`).
 """
 
-from .figures import plot_maps, plot_scatter, plot_slices
+from .figures import maps_figure, plot_maps, plot_scatter, plot_slices, scatter_figure, slices_figure
 from .records import FIT, entry_status, write_params_json, write_residuals_csv
 from .write import write_report
 
 __all__ = ["write_report", "write_params_json", "write_residuals_csv", "entry_status", "plot_maps",
-           "plot_slices", "plot_scatter", "FIT"]
+           "plot_slices", "plot_scatter", "maps_figure", "slices_figure", "scatter_figure", "FIT"]
