@@ -91,6 +91,16 @@ def test_every_registered_model_constructs_under_jit_vmap_and_from_pytree_rebuil
     jax.eval_shape(lambda q: q, p)
 
 
+def test_presets_are_checked_and_a_per_field_vmap_axis_spec_works():
+    for name in registry.names():
+        for preset in registry.get(name).presets.values():
+            validate(preset)
+    p = rc.Params()
+    axes = jax.tree_util.tree_map_with_path(lambda k, _: 0 if k[0].name == "alpha" else None, p)
+    f = jax.vmap(lambda q: rc.eval(q, W2, W2), in_axes=(axes,))(p.replace(alpha=jnp.array([0.1, 0.2, 0.4])))
+    np.testing.assert_allclose(np.asarray(f[1]), np.asarray(rc.eval(rc.Params(alpha=0.2), W2, W2)), rtol=1e-6)
+
+
 def test_traced_construction_under_grad_and_vmap_over_a_batched_field():
     g = jax.grad(lambda a: rc.eval(rc.Params(alpha=a), W2, W2).sum())(0.3)
     assert np.isfinite(float(g)) and float(g) != 0.0
