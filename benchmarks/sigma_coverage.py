@@ -67,7 +67,7 @@ def main(argv=None):
     good = res.converged
     err = np.abs(res.x - TRUE_X)[good]
     rows = [("iid", res.sigma_iid[good]), ("hc1 (entry sandwich)", res.sigma_hc1[good]),
-            ("cluster (CR1 sandwich)", res.sigma_sandwich[good]), (f"default ({res.sigma_method})", res.sigma[good])]
+            ("cr1 (cluster sandwich)", res.sigma_cr1[good]), ("cr3 (cluster sandwich, jackknife)", res.sigma_sandwich[good]), (f"default ({res.sigma_method})", res.sigma[good])]
     kb = min(a.bootstrap_realisations, K)
     boot = None
     if kb > 0:
@@ -113,10 +113,11 @@ def cases(replicates: int):
         res = fit(model, table, fix=fix, bootstrap=replicates)
         print(f"\n## {title}: {model} on {table.source}, fix {fix}")
         print(res.summary())
-        print("| parameter | value | iid sigma | cluster sandwich | hc1 | bootstrap | default |")
-        print("|---|---|---|---|---|---|---|")
+        print("| parameter | value | iid | hc1 | cr1 | cr3 | bootstrap | default |")
+        print("|---|---|---|---|---|---|---|---|")
         for i, lab in enumerate(res.labels):
-            cells = [f"{s[i]:.2g}" for s in (res.sigma_iid, res.sigma_sandwich, res.sigma_hc1, res.sigma_bootstrap)]
+            cells = [f"{s[i]:.2g}" for s in (res.sigma_iid, res.sigma_hc1, res.sigma_cr1, res.sigma_sandwich,
+                                               res.sigma_bootstrap)]
             d = "at bound" if lab in res.at_bound else f"{res.sigma[i]:.2g}"
             print(f"| {lab} | {res.x[i]:.4g} | " + " | ".join(cells) + f" | {d} |")
 

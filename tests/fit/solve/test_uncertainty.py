@@ -7,7 +7,9 @@ data = f_true (1 + EPS g) (1 + NOISE n), n ~ N(0, 1) iid. The field has zero mea
 realisations, so the truth is the parameter that generated f_true (to O(EPS^2) for a
 non-linear model, far below sigma). Within an incidence the ~33 residuals of a band are
 strongly correlated, which is what makes the iid sigma far too small; the cluster-robust
-sandwich, clustered by incidence direction, is built for exactly this.
+sandwich, clustered by incidence direction, is built for exactly this (its jackknife form CR3
+is the default; CR1 under-covers here, 0.55 in benchmarks/sigma_coverage.py, because the
+grazing highlights carry most of the l2 fit's weight).
 """
 
 import json
@@ -77,7 +79,7 @@ def test_honest_sigma_covers_the_truth_and_iid_does_not():
     f = _model_values(model, truth, table)
     K = 64
     res = fit_batch(model, table, _realisations(table, f, K, seed=19), init=model.Params(alpha=0.3), fix=FIX)
-    assert res.converged.all() and res.sigma_method == "cluster" and res.n_clusters == 26
+    assert res.converged.all() and res.sigma_method == "cr3" and res.n_clusters == 26
     t = np.array([0.2, 0.9, 0.8, 0.7])
     err = np.abs(res.x - t)
     cover = np.mean(err < res.sigma)
@@ -90,10 +92,11 @@ def test_honest_sigma_covers_the_truth_and_iid_does_not():
     one = res.item(3)
     np.testing.assert_allclose(one.sigma, res.sigma[3], rtol=1e-6)
     np.testing.assert_allclose(one.sigma_sandwich, res.sigma_sandwich[3], rtol=1e-6)
+    assert np.median(res.sigma_sandwich / res.sigma_cr1) > 1  # the jackknife form undoes CR1's low bias
 
 
 def test_bootstrap_agrees_with_the_sandwich_and_is_reproducible():
-    """B = 48 block-bootstrap refits vs the cluster sandwich on one correlated table.
+    """B = 48 block-bootstrap refits vs the cluster sandwich (CR1 form) on one correlated table.
 
     Both estimate the same spread from the same 26 incidence blocks; the bootstrap sigma has a
     resampling error of 1 / sqrt(2 (B - 1)) = 0.10 relative, and the two differ by the CR1
@@ -107,7 +110,7 @@ def test_bootstrap_agrees_with_the_sandwich_and_is_reproducible():
     res = fit(model, table.replace(values=values), init=model.Params(alpha=0.3), fix=FIX, bootstrap=B,
               bootstrap_seed=3)
     assert res.bootstrap["replicates"] == B and res.bootstrap["failed"] == res.bootstrap["not_converged"] == 0
-    ratio = res.sigma_bootstrap / res.sigma_sandwich
+    ratio = res.sigma_bootstrap / res.sigma_cr1
     assert np.all(np.abs(ratio - 1) < 3.5 / np.sqrt(2 * (B - 1)) + 0.15), ratio
     lo, hi = res.bootstrap["interval68"].T
     assert np.all(lo < res.x) and np.all(res.x < hi)

@@ -53,10 +53,11 @@ class BatchFitResult:
     n_devices: int
     solver: str
     metric: str
-    sigma_method: str = "cluster"
+    sigma_method: str = "cr3"
     sigma_iid: np.ndarray | None = None  # (K, p) each kind as FitResult's
     sigma_hc1: np.ndarray | None = None
-    sigma_sandwich: np.ndarray | None = None  # cluster-robust over incidence directions
+    sigma_sandwich: np.ndarray | None = None  # cluster-robust over incidence directions (CR3)
+    sigma_cr1: np.ndarray | None = None  # its CR1 form
     n_clusters: int = 0
     _problem: object = None
     _z: np.ndarray | None = None
@@ -183,6 +184,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
                           loss=2.0 * loss / np.maximum(n_valid, 1), iterations=steps, converged=ok, at_bound=bound,
                           poorly_determined=flat, wall_time=wall, compile_time=t1 - t0, n_devices=n_dev,
                           solver=solver, metric=metric, sigma_method=method, sigma_iid=diag(out["iid"]),
-                          sigma_hc1=diag(out["hc1"]), sigma_sandwich=diag(out["cluster"]),
+                          sigma_hc1=diag(out["hc1"]), sigma_sandwich=diag(out["cr3"]),
+                          sigma_cr1=diag(out["cr1"]),
                           n_clusters=int(np.min(out["g"])), _problem=problem, _z=z, _data=data_k, _masked=masked,
                           _solve_kw=dict(rtol=rtol, atol=atol, max_steps=max_steps))

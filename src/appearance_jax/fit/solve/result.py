@@ -30,7 +30,8 @@ from .residuals import FLOOR, error_metrics, residual, residual_scale
 from .transforms import ParamSpace
 
 
-FIELD = {"iid": "sigma_iid", "hc1": "sigma_hc1", "cluster": "sigma_sandwich", "bootstrap": "sigma_bootstrap"}
+FIELD = {"iid": "sigma_iid", "hc1": "sigma_hc1", "cr1": "sigma_cr1", "cr3": "sigma_sandwich",
+         "bootstrap": "sigma_bootstrap"}
 
 # ---------------------------------------------------------------------------------------
 # the result
@@ -40,11 +41,11 @@ FIELD = {"iid": "sigma_iid", "hc1": "sigma_hc1", "cluster": "sigma_sandwich", "b
 class FitResult:
     """Outcome of a fit. ``values``/``sigma`` map each free entry label to a number.
 
-    ``sigma`` is the default 1-sigma (method ``sigma_method``: ``"cluster"`` or ``"hc1"``, see
+    ``sigma`` is the default 1-sigma (method ``sigma_method``: ``"cr3"`` or ``"hc1"``, see
     :mod:`~appearance_jax.fit.solve.uncertainty`), NaN at a bound or along an exactly flat
     direction; ``cov`` its covariance. ``sigma_iid``, ``sigma_hc1``, ``sigma_sandwich`` (the
-    cluster-robust one) and ``sigma_bootstrap`` (None unless ``fit(..., bootstrap=B)``) are the
-    raw estimates of each kind.
+    cluster-robust one over incidence directions, CR3), ``sigma_cr1`` and ``sigma_bootstrap``
+    (None unless ``fit(..., bootstrap=B)``) are the raw estimates of each kind.
     """
 
     model: str
@@ -72,10 +73,11 @@ class FitResult:
     fitted: np.ndarray | None = None  # model BRDF (N, B) at the table's directions
     compile_time: float = 0.0  # seconds spent tracing and compiling the solve
     fit_mask: np.ndarray | None = None  # (N, B) True for the entries the fit used (after every mask and weight)
-    sigma_method: str = "iid"
+    sigma_method: str = "iid"  # which kind ``sigma`` is: "cr3" or "hc1" (uncertainty.default_method)
     sigma_iid: np.ndarray | None = None
     sigma_hc1: np.ndarray | None = None
-    sigma_sandwich: np.ndarray | None = None  # cluster-robust (CR1) over incidence directions
+    sigma_sandwich: np.ndarray | None = None  # cluster-robust over incidence directions, jackknife form (CR3)
+    sigma_cr1: np.ndarray | None = None  # cluster-robust, CR1 form
     sigma_bootstrap: np.ndarray | None = None
     bootstrap: dict | None = None  # replicates, failed, seed, interval68, interval95 (p, 2)
     cov_iid: np.ndarray | None = None
@@ -93,8 +95,8 @@ class FitResult:
         return dict(zip(self.labels, self.sigma.tolist()))
 
     def sigmas(self) -> dict:
-        """{kind: (p,) array} of every sigma computed: iid, hc1, cluster and (if run) bootstrap."""
-        out = {"iid": self.sigma_iid, "hc1": self.sigma_hc1, "cluster": self.sigma_sandwich,
+        """{kind: (p,) array} of every sigma computed: iid, hc1, cr1, cr3 and (if run) bootstrap."""
+        out = {"iid": self.sigma_iid, "hc1": self.sigma_hc1, "cr1": self.sigma_cr1, "cr3": self.sigma_sandwich,
                "bootstrap": self.sigma_bootstrap}
         return {k: v for k, v in out.items() if v is not None}
 
@@ -245,7 +247,7 @@ def _warnings(res: FitResult, s2: float, absolute: bool) -> list:
                    "try another model")
     out += [f"degenerate: {g['text']}" for g in res.degeneracies]
     p = len(res.labels)
-    if res.sigma_method != "cluster":
+    if res.sigma_method == "hc1":
         out.append(f"only {res.n_clusters} incidence directions (< {unc.min_clusters(p)} for {p} parameters): "
                    "sigma is the entry sandwich (HC1), blind to residuals correlated within an incidence; "
                    "it may be too small")
@@ -291,7 +293,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
         converged=bool(ok), solver=solver, metric=problem.metric, n_valid=m, masked=problem.masked,
         fixed=_fixed_record(sp), starts=starts or {}, table=table, fitted=fitted, fit_mask=w,
         sigma_method=method, sigma_iid=diag(out["iid"]), sigma_hc1=diag(out["hc1"]),
-        sigma_sandwich=diag(out["cluster"]), cov_iid=np.asarray(out["iid"], np.float64),
+        sigma_sandwich=diag(out["cr3"]), sigma_cr1=diag(out["cr1"]), cov_iid=np.asarray(out["iid"], np.float64),
         n_clusters=int(out["g"]), clusters=what, bootstrap=bootstrap,
         sigma_bootstrap=None if bootstrap is None else np.asarray(bootstrap["sigma"], np.float64))
     res.degeneracies = unc.degeneracies(sp, x, sp.labels, [out["iid"], out[method]], exact, bound)

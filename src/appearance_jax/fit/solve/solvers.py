@@ -191,15 +191,17 @@ def _bootstrap(problem: Problem, z, n_boot: int, seed: int, **solve_kw) -> dict:
     return out
 
 
-def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None, weight=None, **solve_kw):
+def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None, weight=None,
+                     batch_size: int = 8, **solve_kw):
     """Block-bootstrap refits over incidence directions, all in one vmapped solve.
 
     ``zs`` (K, p): the optima of K fits of ``problem`` (K = 1 for :func:`fit`); ``f`` and
     ``weight`` (K, N, B): their data (default: the problem's own, broadcast). Every replicate
     multiplies the weights by sqrt(multiplicity) of the resampled incidence clusters
     (:func:`~.uncertainty.bootstrap_weights`, the same ``n_boot`` draws for every fit), so
-    shapes stay fixed, and starts from the fit's optimum. Returns physical x (K, n_boot, p) and
-    converged (K, n_boot), numpy.
+    shapes stay fixed, and starts from the fit's optimum. The replicates run ``batch_size`` at a
+    time (vmapped) in one compiled loop. Returns physical x (K, n_boot, p) and converged
+    (K, n_boot), numpy.
     """
     data = problem.data
     zs = np.atleast_2d(np.asarray(zs))
@@ -217,7 +219,10 @@ def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None
             z, _, _, ok = solve_z(problem, z, d, **solve_kw)
             return problem.space.x_from_z(z), ok
 
-        return jax.vmap(lambda z, f, w: jax.vmap(lambda m: one(z, f, w * m))(mult))(zs, fs, ws)
+        # replicates in chunks of batch_size (lax.map): the memory of a vmapped solve grows with
+        # the batch (a coated model's Jacobian over 64 replicates needs tens of GB)
+        return jax.vmap(lambda z, f, w: jax.lax.map(lambda m: one(z, f, w * m), mult,
+                                                    batch_size=min(batch_size, n_boot)))(zs, fs, ws)
 
     xs, ok = jax.jit(run)(jnp.asarray(zs, dt), jnp.asarray(fs, dt), jnp.asarray(ws, dt), mult, data)
     return np.asarray(xs, np.float64), np.asarray(ok)
