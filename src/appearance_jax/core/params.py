@@ -27,7 +27,8 @@ objects that were not (pytree rebuilds):
 Traced values (inside ``jit``/``vmap``/``grad``) and abstract ones (``jax.ShapeDtypeStruct``)
 are not checked, so kernels stay branch-free. Pytree unflattening (``jax.tree.map``,
 ``jax.eval_shape``, Jacobians, ``vmap`` axis specs such as ``jax.tree.map(lambda _: 0, p)``)
-rebuilds a ``Params`` without converting or checking its leaves. Under ``jit``, where
+rebuilds a ``Params`` without converting or checking its leaves (so build a per-field axis
+spec with ``jax.tree_util.tree_map_with_path``, not ``Params(alpha=0, ...)``, which is checked). Under ``jit``, where
 eager checks cannot run, :func:`check_traced` emits :mod:`jax.experimental.checkify`
 checks of the same ranges, and :func:`checked` wraps a function so that they are raised.
 """
