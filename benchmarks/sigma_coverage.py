@@ -51,9 +51,10 @@ def main(argv=None):
     ap.add_argument("--replicates", type=int, default=32)
     ap.add_argument("--seed", type=int, default=2026)
     ap.add_argument("--cases", action="store_true", help="fit the metal, plastic and fabric example tables")
+    ap.add_argument("--only", nargs="*", default=None, help="with --cases: these titles (metal, plastic, fabric)")
     a = ap.parse_args(argv)
     if a.cases:
-        return cases(a.replicates)
+        return cases(a.replicates, a.only)
     model = registry.get("rough_conductor")
     ti, to = in_plane_angles(np.arange(0, 76, 3), np.arange(-80, 81, 5))
     table = Table.in_plane(ti, to, np.ones((ti.size, 3)), source="correlated in-plane")
@@ -100,12 +101,15 @@ CASES = (  # (title, model, table, fix): proxies on an in-plane grid with 26 inc
 )
 
 
-def cases(replicates: int):
-    """The iid, sandwich and bootstrap sigma and the flagged degeneracies of three example fits."""
+def cases(replicates: int, only=None):
+    """The iid, sandwich and bootstrap sigma and the flagged degeneracies of three example fits
+    (``replicates`` = 0: no bootstrap)."""
     from appearance_jax.fit import fit, read_table
     from appearance_jax.fit.tables.proxy import proxy_table
 
     for title, model, source, fix in CASES:
+        if only and title not in only:
+            continue
         if source.startswith("proxy:"):
             table = proxy_table(source[6:], "in_plane", theta_i_deg=np.arange(0, 76, 3))
         else:
@@ -116,8 +120,8 @@ def cases(replicates: int):
         print("| parameter | value | iid | hc1 | cr1 | cr3 | bootstrap | default |")
         print("|---|---|---|---|---|---|---|---|")
         for i, lab in enumerate(res.labels):
-            cells = [f"{s[i]:.2g}" for s in (res.sigma_iid, res.sigma_hc1, res.sigma_cr1, res.sigma_sandwich,
-                                               res.sigma_bootstrap)]
+            cells = ["-" if s is None else f"{s[i]:.2g}" for s in (res.sigma_iid, res.sigma_hc1, res.sigma_cr1,
+                                                                   res.sigma_sandwich, res.sigma_bootstrap)]
             d = "at bound" if lab in res.at_bound else f"{res.sigma[i]:.2g}"
             print(f"| {lab} | {res.x[i]:.4g} | " + " | ".join(cells) + f" | {d} |")
 
