@@ -11,7 +11,8 @@ from jax.experimental import checkify
 
 from appearance_jax import registry
 from appearance_jax.bsdf import rough_conductor as rc
-from appearance_jax.core.params import ParamSpec, check_traced, checked, param_specs, validate
+from appearance_jax.core.params import (ParamSpec, check_traced, checked, param_specs, replace_unchecked,
+                                        validate)
 from appearance_jax.core.vec import UNIT_TOLERANCE, Vec3, as_direction, vec3
 
 W = vec3(0.0, 0.0, 1.0)
@@ -118,6 +119,10 @@ def test_rebuilt_pytrees_are_still_checked_at_the_boundary():
     with pytest.raises(ValueError, match=r"\.alpha = -0\.1 is outside"):
         validate(bad)
     validate(rc.Params())
+    with pytest.raises(ValueError, match=r"rough_conductor\.Params\.k has 3 bands .*\.eta has 2"):
+        rc.pdf(replace_unchecked(rc.Params(), eta=(1.0, 2.0)), W, W)
+    with pytest.raises(TypeError, match="has no field"):
+        replace_unchecked(rc.Params(), alhpa=0.1)
 
 
 # ----------------------------------------------------------------------------------------

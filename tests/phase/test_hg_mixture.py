@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from appearance_jax import testing
+from appearance_jax.core.params import replace_unchecked
 from appearance_jax.core.vec import Vec3, dot
 from appearance_jax.phase import henyey_greenstein as hg
 from appearance_jax.phase import hg_mixture as mix
@@ -142,7 +143,9 @@ def test_gradients_vs_finite_differences():
                                            ("g2", float("inf"), r"\(-1, 1\)")])
 def test_bad_parameters_raise(field, bad, rng):
     wi, wo = _dirs(2, 0), _dirs(2, 1)
-    p = mix.Params(**{field: bad})
+    with pytest.raises(ValueError, match=rf"Params\.{field} = .*{rng}"):
+        mix.Params(**{field: bad})  # checked at construction
+    p = replace_unchecked(mix.Params(), **{field: bad})  # as a pytree rebuild: checked at each call
     for call in (lambda: mix.eval(p, wi, wo), lambda: mix.pdf(p, wi, wo),
                  lambda: mix.sample(p, wi, jax.random.key(0))):
         with pytest.raises(ValueError, match=rf"Params\.{field} = .*{rng}"):

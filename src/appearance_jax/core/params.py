@@ -301,6 +301,20 @@ def _replace(self, **kw):
         _TRUSTED.reset(token)
 
 
+def replace_unchecked(params, **values):
+    """A copy of ``params`` with ``values`` set as given: no conversion and no check, as JAX's
+    pytree rebuilds make them (for tests of the checks at the public boundary, which still
+    run on such an object; :func:`validate`)."""
+    cls = type(params)
+    unknown = set(values) - set(cls._data_fields) - set(cls._static_fields)
+    if unknown:
+        raise TypeError(f"{_label(cls)} has no field(s) {', '.join(sorted(unknown))}")
+    obj = object.__new__(cls)
+    for n in cls._static_fields + cls._data_fields:
+        object.__setattr__(obj, n, values.get(n, getattr(params, n)))
+    return obj
+
+
 def _register(dc, data: tuple, meta: tuple) -> None:
     """Pytree registration whose unflatten bypasses ``__init__``: JAX rebuilds a Params from
     leaves that are no parameter values (tracers, ``ShapeDtypeStruct``, the ints and Nones of
