@@ -177,7 +177,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     z, x, loss, steps, ok = (np.asarray(a)[:K] for a in (z, x, loss, steps, ok))
     out = {k: np.asarray(v)[:K] for k, v in out.items()}
     method, raw, sig = sigma_kinds(sp, x, out)
-    bound, flat = flags(sp, x, raw, [out["iid"], out[method]], out["flat"])
+    bound, flat = flags(sp, x, raw, [out[method]], out["flat"])
     diag = lambda c: np.sqrt(np.abs(np.diagonal(c, axis1=-2, axis2=-1)))  # noqa: E731
     data_k = {n: (v if n not in per_item else np.asarray(v)[:K]) for n, v in data.items()}
     return BatchFitResult(model=problem.model.name, labels=sp.labels, units=sp.units(), x=x, sigma=sig,

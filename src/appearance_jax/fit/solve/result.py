@@ -5,7 +5,7 @@ the residuals with respect to the **physical** free parameters gives the iid cov
 s^2 (J^T J)^-1, the entry sandwich (HC1), the cluster-robust sandwich over incidence directions
 (CR1) and, on request (``fit(..., bootstrap=B)``), a block bootstrap over incidence directions.
 ``sigma`` is the default: the cluster sandwich when the table has enough incidence directions,
-else HC1, never below the iid sigma (docs/fitting.md, "Uncertainties"). Parameters on a bound
+else HC1; the iid sigma is reported next to it (docs/fitting.md, "Uncertainties"). Parameters on a bound
 get sigma = NaN (the linearisation does not hold there; the report prints "at bound"), and so do
 parameters in an exactly flat direction. ``poorly_determined`` lists the parameters of
 unresolved directions (noise-derived rule of :func:`~.uncertainty.degeneracies`) and those whose
@@ -165,7 +165,7 @@ class FitResult:
             n_valid=self.n_valid, masked=self.masked, fixed=self.fixed,
             parameters={lab: param(i, lab) for i, lab in enumerate(self.labels)},
             uncertainty=dict(method=self.sigma_method, description=unc.DESCRIPTION.get(self.sigma_method, ""),
-                             floor="never below sigma_iid", kinds=list(self.sigmas()),
+                             floor=None, kinds=list(self.sigmas()),
                              n_clusters=int(self.n_clusters), clusters=self.clusters,
                              min_clusters=unc.min_clusters(len(self.labels)), bootstrap=boot),
             correlation=dict(method=self.sigma_method, labels=list(self.labels),
@@ -181,7 +181,7 @@ class FitResult:
         kinds = self.sigmas()
         if kinds:
             lines.append(f"  +- is 1 sigma, {unc.DESCRIPTION.get(self.sigma_method, self.sigma_method)} "
-                         f"({self.n_clusters} clusters: {self.clusters}), never below iid")
+                         f"({self.n_clusters} clusters: {self.clusters})")
         w = max(len(lab) for lab in self.labels)
         for i, (lab, v, s, u) in enumerate(zip(self.labels, self.x, self.sigma, self.units)):
             unit = "" if u in ("1", "") else f" {u}"
@@ -211,7 +211,7 @@ def _fixed_record(space: ParamSpace) -> dict:
 def flags(space: ParamSpace, x, sigma, covs, exact_flat):
     """(at_bound, poorly_determined) bool arrays (..., p); numpy, leading batch axes allowed.
 
-    ``sigma`` the default sigma, ``covs`` a list of covariances (..., p, p) (iid and the default
+    ``sigma`` the default sigma, ``covs`` a list of covariances (..., p, p) (the default
     method) for the unresolved-direction rule, ``exact_flat`` (..., p) from
     :func:`~.uncertainty.covariances`.
     """
@@ -232,7 +232,7 @@ def sigma_kinds(space: ParamSpace, x, out: dict):
     """(method, raw default sigma, sigma) from the covariances of :func:`~.uncertainty.covariances` (numpy,
     batch axes allowed): the default sigma is NaN at a bound and in an exactly flat direction."""
     method = unc.default_method(np.min(np.asarray(out["g"])), space.size)
-    raw = unc.default_sigma(out["iid"], out[method])
+    raw = unc.default_sigma(out[method])
     bad = space.at_bound(x) | np.asarray(out["flat"], bool)
     return method, raw, np.where(bad, np.nan, raw)
 
@@ -278,7 +278,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     cov = np.asarray(out[method], np.float64)
     exact = np.asarray(out["flat"], bool)
     cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
-    bound, flat = flags(sp, x, raw, [out["iid"], out[method]], exact)
+    bound, flat = flags(sp, x, raw, [out[method]], exact)
     params = sp.params_from_x(jnp.asarray(x))
     w = np.asarray(data["weight"]) > 0
     fitted = np.asarray(problem.evaluate(params, data), np.float64)
@@ -296,7 +296,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
         sigma_sandwich=diag(out["cr3"]), sigma_cr1=diag(out["cr1"]), cov_iid=np.asarray(out["iid"], np.float64),
         n_clusters=int(out["g"]), clusters=what, bootstrap=bootstrap,
         sigma_bootstrap=None if bootstrap is None else np.asarray(bootstrap["sigma"], np.float64))
-    res.degeneracies = unc.degeneracies(sp, x, sp.labels, [out["iid"], out[method]], exact, bound)
+    res.degeneracies = unc.degeneracies(sp, x, sp.labels, [out[method]], exact, bound)
     grouped = {lab for g in res.degeneracies for lab in g["parameters"]}
     res.poorly_determined = tuple(lab for lab, b in zip(sp.labels, flat) if b or lab in grouped)
     res.warnings = _warnings(res, float(out["s2"]), bool(problem.absolute_sigma))

@@ -36,10 +36,8 @@ reports the standard deviation and percentile intervals of the replicates
 
 The default sigma of a :class:`~appearance_jax.fit.solve.FitResult` (:func:`default_method`)
 is CR3 when the table has at least :func:`min_clusters` incidence directions, else the entry
-sandwich HC1 (with a warning), and never less than the iid sigma:
-sigma = sqrt(max(diag Cov_iid, diag Cov_method)). The floor guards against the sandwich's own
-sampling noise; when the model fits and the noise is independent both agree and the iid
-estimate is the efficient one.
+sandwich HC1 (with a warning): sigma = sqrt(diag Cov_method), with no floor at the iid sigma
+(:func:`default_sigma` says why; the iid sigma is reported next to it).
 
 Degeneracies (:func:`degeneracies`): each parameter is scaled by its magnitude, clipped to
 [1 %, 100 %] of its declared range (u = x / scale; a bounded range such as eta in [0, 20] is far
@@ -49,7 +47,7 @@ noise: the loss rises by delta^2 lambda_v for a step delta and by one noise unit
 1-sigma contour, so v is flat when its sigma, sqrt(v^T Cov_u v), exceeds FLAT_FRACTION (with the
 iid covariance this is the eigenvalue rule lambda_v FLAT_FRACTION^2 < s^2 of the scaled J^T J;
 with the sandwich it uses the honest noise level instead of s^2). The unresolved directions are
-the eigenvectors of the scaled covariances (iid and the default method) with an eigenvalue above
+the eigenvectors of the scaled covariance of the default method with an eigenvalue above
 FLAT_FRACTION^2; every parameter with a component above 0.3 in one belongs to its group.
 A group also takes in every parameter correlated with a member by more than ``CORR`` (0.95).
 Directions with an eigenvalue of the column-normalised J^T J below a fraction of the largest
@@ -190,11 +188,16 @@ def default_method(n_clusters, p: int) -> str:
     return "cr3" if int(n_clusters) >= min_clusters(p) else "hc1"
 
 
-def default_sigma(cov_iid, cov_method) -> np.ndarray:
-    """sqrt(max(diag Cov_iid, diag Cov_method)) (numpy; leading batch axes allowed)."""
-    a = np.diagonal(np.asarray(cov_iid, np.float64), axis1=-2, axis2=-1)
+def default_sigma(cov_method) -> np.ndarray:
+    """sqrt(diag Cov_method) (numpy; leading batch axes allowed).
+
+    No floor at the iid sigma: the iid sigma pools s^2 over every entry, so when the errors are
+    heteroscedastic (a glossy peak's residuals are orders of magnitude larger than the diffuse
+    part's) it inflates the sigma of parameters that only the quiet entries determine (a coat's
+    diffuse albedo) and would flag them as undetermined although the data pin them down.
+    """
     b = np.diagonal(np.asarray(cov_method, np.float64), axis1=-2, axis2=-1)
-    return np.sqrt(np.maximum(np.abs(a), np.abs(b)))
+    return np.sqrt(np.abs(b))
 
 
 def scales(space, x) -> np.ndarray:
@@ -210,7 +213,7 @@ def scales(space, x) -> np.ndarray:
 def unresolved(space, x, covs) -> tuple[np.ndarray, np.ndarray]:
     """(sigma along each unresolved eigen-direction, their eigenvectors) in scaled parameters.
 
-    ``covs``: covariances (p, p) of one fit (iid and the default method). Returns a (k,) array
+    ``covs``: covariances (p, p) of one fit (the default method's). Returns a (k,) array
     of sigmas in units of the parameters' :func:`scales` (largest first) and (p, k) unit
     eigenvectors, for the directions whose sigma exceeds ``FLAT_FRACTION``.
     """
@@ -250,7 +253,7 @@ def _suggest(labels, members, comps) -> str:
 def degeneracies(space, x, labels, covs, exact_flat, bound) -> list[dict]:
     """Groups of parameters that move together without changing the fit, with a suggestion.
 
-    ``covs`` (the iid and the default covariance), ``exact_flat`` (p,) bool (numerically flat,
+    ``covs`` (the default method's covariance), ``exact_flat`` (p,) bool (numerically flat,
     :func:`covariances`), ``bound`` (p,) bool. Each group: ``parameters`` (labels),
     ``direction`` (components in scaled units), ``sigma_scaled`` (its 1-sigma in units of the
     parameters' :func:`scales`, None when exactly flat), ``correlated`` (the largest |correlation| among
