@@ -200,3 +200,22 @@ def test_fit_that_does_not_converge_exits_3_and_says_so_last(lambert_csv, tmp_pa
     assert last.startswith("status: NOT converged") and "--max-steps 1" in last and last.endswith("(exit 3)")
     d = json.loads((out / "params.json").read_text())
     assert d["converged"] is False and d["exit"] == {"code": 3, "status": "not converged"}
+
+
+def test_fit_that_diverges_exits_3_with_a_named_error(lambert_csv, tmp_path, capsys, monkeypatch):
+    """A solve ending on non-finite parameters is reported as such (FitDiverged), not as a bad
+    user value of a Params field, and exits 3 with the status as its last line."""
+    import jax.numpy as jnp
+
+    from appearance_jax.fit.solve import FitDiverged, solvers
+
+    def diverging(problem, z0, data, **kw):
+        return jnp.full_like(z0, jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(7), jnp.asarray(False)
+
+    monkeypatch.setattr(solvers, "solve_z", diverging)
+    code = main(["fit", lambert_csv, "--model", "lambert", "--no-plots", "--out", str(tmp_path / "fit")])
+    assert code == EXIT_NOT_CONVERGED
+    cap = capsys.readouterr()
+    assert "diverged after 7 steps" in cap.err and "reflectance" in cap.err
+    assert cap.out.strip().splitlines()[-1] == "status: NOT converged: the solver diverged (exit 3)"
+    assert issubclass(FitDiverged, ArithmeticError) and not issubclass(FitDiverged, ValueError)

@@ -31,6 +31,13 @@ def main(argv: list[str] | None = None) -> int:
         msg = e.args[0] if isinstance(e, KeyError) and e.args else str(e)  # KeyError's str() adds quotes
         print(f"appearance-jax {args.cmd}: error: {msg}", file=sys.stderr)
         return EXIT_USAGE
+    except ArithmeticError as e:
+        if type(e).__name__ != "FitDiverged":  # fit.solve.result's; not imported here (jax is slow to import)
+            raise
+        # the solve ran but ended on non-finite parameters: nothing to report
+        print(f"appearance-jax {args.cmd}: error: {e}", file=sys.stderr)
+        print(f"status: NOT converged: the solver diverged (exit {EXIT_NOT_CONVERGED})")
+        return EXIT_NOT_CONVERGED
     except OSError as e:  # a file that could not be read or written (permissions, disk full)
         print(f"appearance-jax {args.cmd}: error: {e}", file=sys.stderr)
         return EXIT_FAILURE

@@ -27,7 +27,7 @@ EXIT_CODES = {
     EXIT_OK: "success (fit: the solver converged)",
     EXIT_FAILURE: "failure while running (e.g. a file could not be written)",
     EXIT_USAGE: "invalid command line or input (option value, model name, table file); nothing was computed",
-    EXIT_NOT_CONVERGED: "fit: the solver did not converge (report written; params.json has converged: false)",
+    EXIT_NOT_CONVERGED: "fit: the solver did not converge (report written; params.json has converged: false) or diverged to non-finite parameters (no report)",
 }
 
 

@@ -9,9 +9,9 @@ parameter spaces), ``problem`` (a fit's data and residuals),
 
 from .batch import BatchFitResult, fit_batch
 from .problem import Problem, build_problem, entry_arrays
-from .result import FitResult, finish
+from .result import FitDiverged, FitResult, finish
 from .uncertainty import covariance, covariances
 from .solvers import SOLVERS, fit, solve_z
 
-__all__ = ["fit", "FitResult", "fit_batch", "BatchFitResult", "build_problem", "entry_arrays", "solve_z",
+__all__ = ["fit", "FitResult", "FitDiverged", "fit_batch", "BatchFitResult", "build_problem", "entry_arrays", "solve_z",
            "covariance", "covariances", "finish", "Problem", "SOLVERS"]

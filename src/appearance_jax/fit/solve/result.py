@@ -261,6 +261,10 @@ def _warnings(res: FitResult, s2: float, absolute: bool) -> list:
     return out
 
 
+class FitDiverged(ArithmeticError):
+    """The solver ended on non-finite parameters (every start diverged): there is no result to report."""
+
+
 def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, starts=None, data=None,
            bootstrap=None) -> FitResult:
     """Turn a solver's z into a :class:`FitResult` (uncertainties, flags, error metrics).
@@ -270,6 +274,11 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     data = problem.data if data is None else data
     sp = problem.space
     x = sp.x_from_z(jnp.asarray(z))
+    bad = [lab for lab, v in zip(sp.labels, np.asarray(x, np.float64)) if not np.isfinite(v)]
+    if bad:  # a Params cannot hold them (it would raise naming a field as if the user had set it)
+        raise FitDiverged(f"the solver diverged after {int(steps)} steps: non-finite {', '.join(bad)} "
+                          "(the residuals became NaN or inf); try other starts (n_starts / --starts), "
+                          "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
     out = jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl))(x, data, jnp.asarray(cl))
     out = {k: np.asarray(v) for k, v in out.items()}
@@ -303,4 +312,4 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     return res
 
 
-__all__ = ["FitResult", "flags", "finish", "sigma_kinds"]
+__all__ = ["FitResult", "FitDiverged", "flags", "finish", "sigma_kinds"]

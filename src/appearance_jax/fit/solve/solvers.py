@@ -132,6 +132,10 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
             resampled with replacement (``bootstrap_seed``) and refitted from the optimum in one
             vmapped solve; sets ``sigma_bootstrap`` and ``bootstrap`` (percentile intervals) of
             the result (:mod:`~appearance_jax.fit.solve.uncertainty`). 64 is a good start.
+
+    Raises:
+        FitDiverged: every start ended on non-finite parameters (:mod:`~.result`); a fit that
+            merely stops at ``max_steps`` returns a result with ``converged = False``.
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
