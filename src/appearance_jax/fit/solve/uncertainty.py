@@ -314,8 +314,7 @@ def bootstrap_weights(cluster, valid_rows, n_boot: int, seed: int = 0) -> np.nda
     rng = np.random.default_rng(seed)
     draws = rng.integers(0, live.size, size=(n_boot, live.size))
     counts = np.zeros((n_boot, int(cluster.max()) + 1))
-    for b in range(n_boot):
-        np.add.at(counts[b], live[draws[b]], 1.0)
+    np.add.at(counts, (np.arange(n_boot)[:, None], live[draws]), 1.0)  # counts[b, c] += 1 per draw
     return counts[:, cluster]
 
 
