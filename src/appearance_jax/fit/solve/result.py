@@ -219,9 +219,7 @@ def flags(space: ParamSpace, x, sigma, covs, exact_flat):
     bound = space.at_bound(x)
     flat = np.asarray(exact_flat, bool).copy()
     covs = [np.asarray(c, np.float64) for c in covs]
-    xs, cs = x.reshape(-1, x.shape[-1]), [c.reshape(-1, *c.shape[-2:]) for c in covs]
-    noise_flat = np.stack([unc.flat_members(space, xs[k], [c[k] for c in cs]) for k in range(xs.shape[0])])
-    flat |= noise_flat.reshape(flat.shape)
+    flat |= unc.flat_members(space, x, covs)
     specs = [f.spec for f in space.fields for _ in range(f.size)]
     width = np.array([s.hi - s.lo for s in specs], np.float64)
     flat |= ~np.isfinite(sigma) | (sigma > np.maximum(np.abs(x), 1e-12)) | (sigma > width)

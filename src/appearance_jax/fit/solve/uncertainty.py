@@ -233,9 +233,23 @@ def unresolved(space, x, covs) -> tuple[np.ndarray, np.ndarray]:
 
 
 def flat_members(space, x, covs) -> np.ndarray:
-    """(p,) bool: the parameter belongs to an unresolved direction (:func:`unresolved`)."""
-    _, v = unresolved(space, x, covs)
-    return np.any(np.abs(v) > MEMBER, axis=1) if v.size else np.zeros(len(np.atleast_1d(x)), bool)
+    """(..., p) bool: the parameter belongs to an unresolved direction (:func:`unresolved`).
+
+    Leading batch axes allowed (``x`` (..., p), each cov (..., p, p)): one batched
+    eigendecomposition for a whole :func:`~appearance_jax.fit.solve.fit_batch`. A fit whose
+    scaled covariance is not finite contributes no direction, as in :func:`unresolved`.
+    """
+    x = np.asarray(x, np.float64)
+    R = scales(space, x)
+    out = np.zeros(x.shape, bool)
+    for cov in covs:
+        cu = np.asarray(cov, np.float64) / (R[..., :, None] * R[..., None, :])
+        finite = np.all(np.isfinite(cu), axis=(-2, -1))
+        cu = np.where(finite[..., None, None], cu, 0.0)
+        w, v = np.linalg.eigh(0.5 * (cu + np.swapaxes(cu, -1, -2)))
+        big = (w > FLAT_FRACTION ** 2) & finite[..., None]  # (..., k): direction k is unresolved
+        out |= np.any((np.abs(v) > MEMBER) & big[..., None, :], axis=-1)
+    return out
 
 
 def _suggest(labels, members, comps) -> str:
