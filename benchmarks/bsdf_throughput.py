@@ -1,6 +1,6 @@
 """Throughput of rough_conductor eval and eval+grad (w.r.t. roughness) vs Mitsuba 3.
 
-    python benchmarks/bsdf_throughput.py [--n 1000000] [--repeats 10] [--devices 2]
+    python benchmarks/bsdf_throughput.py [--n 1000000] [--repeats 10] [--devices 2] [--native]
 
 Prints evaluations per second for appearance-jax (float32, jit, Vec3-of-arrays) and, in
 the same run, for Mitsuba 3 ``llvm_ad_rgb`` when it is importable (it needs a system
@@ -15,11 +15,19 @@ every core. ``--devices N`` (default: the number of cores) splits the host into 
 devices and shards the direction batch over them with ``jax.sharding`` -- JAX's own
 parallelism, the same mechanism a batched fit uses -- and the single-device figure is
 printed as well.
+
+Reverse mode is timed twice: as shipped (``rough_conductor.eval`` carries
+``core.autodiff.forward_jacobian_rule``: one perturbed scalar costs one forward-mode column)
+and with ``--native`` also JAX's plain reverse mode of the unwrapped kernel, alternately in
+the same run. The temporary memory of each compiled gradient (XLA's ``memory_analysis``) is
+printed with it.
 """
 
 from __future__ import annotations
 
 import os
+import sys
+import time
 
 from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
@@ -28,7 +36,29 @@ K = (3.40, 2.25, 1.80)
 ALPHA = 0.3
 
 
-def bench_jax(wi_np, wo_np, repeats, n_devices=1):
+def best_times(runs, repeats):
+    """Best wall time of each of ``runs`` (name -> callable) after a warm-up call each, the
+    calls alternating so that a change in machine load affects them alike."""
+    times = {k: [] for k in runs}
+    for fn in runs.values():
+        fn()
+    for _ in range(repeats):
+        for k, fn in runs.items():
+            t0 = time.perf_counter()
+            fn()
+            times[k].append(time.perf_counter() - t0)
+    return {k: min(v) for k, v in times.items()}
+
+
+def _temp_mb(f, *args):
+    """Temporary buffer size of the compiled ``f(*args)`` in MB (None where XLA does not say)."""
+    m = f.lower(*args).compile().memory_analysis()
+    return None if m is None else m.temp_size_in_bytes / 1e6
+
+
+def bench_jax(wi_np, wo_np, repeats, n_devices=1, native=False):
+    """Best times [s] of eval, reverse-mode eval+grad, forward-mode eval+grad and (``native``)
+    plain reverse mode of the unwrapped kernel, their temporary memory [MB], jax's version."""
     import jax
     import jax.numpy as jnp
 
@@ -41,13 +71,20 @@ def bench_jax(wi_np, wo_np, repeats, n_devices=1):
     f_eval = jax.jit(kernel)
     loss = lambda a, wi, wo: jnp.sum(kernel(params.replace(alpha=a), wi, wo))  # noqa: E731
     f_grad = jax.jit(jax.value_and_grad(loss))
+    # JAX's own reverse mode: the kernel without its forward-Jacobian rule (stores the graph)
+    loss_native = lambda a, wi, wo: jnp.sum(kernel.unwrapped(params.replace(alpha=a), wi, wo))  # noqa: E731
+    f_native = jax.jit(jax.value_and_grad(loss_native))
     # forward mode: one scalar parameter -> one JVP pass (what a Jacobian column costs in a fit)
     f_fwd = jax.jit(lambda a, wi, wo: jax.jvp(lambda a: loss(a, wi, wo), (a,), (jnp.ones_like(a),)))
     a = jnp.float32(ALPHA)
-    t_eval = best_time(lambda: f_eval(params, wi, wo).block_until_ready(), repeats)
-    t_grad = best_time(lambda: f_grad(a, wi, wo)[1].block_until_ready(), repeats)
-    t_fwd = best_time(lambda: f_fwd(a, wi, wo)[1].block_until_ready(), repeats)
-    return t_eval, t_grad, t_fwd, jax.__version__
+    runs = {"eval": lambda: f_eval(params, wi, wo).block_until_ready(),
+            "grad": lambda: f_grad(a, wi, wo)[1].block_until_ready(),
+            "fwd": lambda: f_fwd(a, wi, wo)[1].block_until_ready()}
+    mem = {"grad": _temp_mb(f_grad, a, wi, wo), "fwd": _temp_mb(f_fwd, a, wi, wo)}
+    if native:
+        runs["native"] = lambda: f_native(a, wi, wo)[1].block_until_ready()
+        mem["native"] = _temp_mb(f_native, a, wi, wo)
+    return best_times(runs, repeats), mem, jax.__version__
 
 
 def bench_mitsuba(wi_np, wo_np, repeats):
@@ -90,13 +127,20 @@ def bench_mitsuba(wi_np, wo_np, repeats):
 
 
 def main():
+    native = "--native" in sys.argv  # this script's own flag (the common ones: throughput_args)
+    sys.argv = [a for a in sys.argv if a != "--native"]
     args = throughput_args(__doc__)
     wi, wo = upper_hemisphere_pairs(args.n)
     rows = []
     for nd in sorted({1, args.devices}):
-        tj_e, tj_g, tj_f, jv = bench_jax(wi, wo, args.repeats, nd)
-        rows += [(f"appearance-jax {nd} device(s), reverse-mode grad (jax {jv})", tj_e, tj_g),
-                 (f"appearance-jax {nd} device(s), forward-mode grad (jvp)", tj_e, tj_f)]
+        t, mem, jv = bench_jax(wi, wo, args.repeats, nd, native)
+        labels = {"grad": f"reverse-mode grad (jax {jv})", "fwd": "forward-mode grad (jvp)",
+                  "native": "reverse-mode grad, native (no rule)"}
+        for key in [k for k in labels if k in t]:
+            rows.append((f"appearance-jax {nd} device(s), {labels[key]}", t["eval"], t[key]))
+            print(f"{rows[-1][0].split(' (jax')[0]}: temporary memory {mem[key]} MB")
+        if "native" in t:
+            print(f"ratio reverse-mode with rule / native, {nd} device(s): {t['native'] / t['grad']:.2f}")
     tm_e, tm_g, mv = bench_mitsuba(wi, wo, args.repeats)
     rows.append((mv, tm_e, tm_g))
     print(f"{'implementation':64s} {'eval [M/s]':>11s} {'eval+grad [M/s]':>16s}")

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import functools
 
+from ..core.autodiff import forward_jacobian_rule
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import Bands, param, params_class, Real, static
 from ..core.vec import Vec3
@@ -84,7 +85,9 @@ def _sample(p: Params, wi: Vec3, u):
     return ct.sample_reflection(p, wi, u, functools.partial(_fresnel, p))
 
 
-eval = boundary(_eval, Params)
+# one differentiated scalar (a roughness fit, a reverse-mode gradient w.r.t. alpha) costs one
+# forward-mode pass instead of JAX's stored reverse graph (core.autodiff)
+eval = boundary(forward_jacobian_rule(_eval), Params)
 pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 
