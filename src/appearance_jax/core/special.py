@@ -8,6 +8,8 @@ argument into the domain and give the derivative a finite one-sided value there
 
 from __future__ import annotations
 
+import math
+
 import jax
 import jax.numpy as jnp
 
@@ -145,3 +147,91 @@ def erf(x):
 
 def erfinv(x):
     return jax.scipy.special.erfinv(x)
+
+
+# Stirling series of log Gamma: lgamma(X) = (X - 1/2) log X - X + log(2 pi)/2 + S(X),
+# S(X) = sum_k B_2k / (2k (2k - 1) X^(2k - 1)) (Abramowitz & Stegun 6.1.40).
+_STIRLING = (1 / 12, -1 / 360, 1 / 1260, -1 / 1680, 1 / 1188, -691 / 360360, 1 / 156)
+# (shift, terms) by float width: the arguments are shifted up by `shift` integers before the
+# series is used; truncation error per S < 1e-15 at X >= 9 (float64), < 1e-8 at X >= 5 (float32).
+_BETA_SERIES = {64: (8, 7), 32: (4, 3), 16: (4, 3)}
+
+
+def _stirling_tail(r, n_terms):
+    """S(X) from r = 1/X, truncated after ``n_terms`` terms (Horner in 1/X^2)."""
+    r2 = r * r
+    s = _STIRLING[n_terms - 1]
+    for c in _STIRLING[n_terms - 2::-1]:
+        s = s * r2 + c
+    return s * r
+
+
+def _rising_scaled(v, r2, n):
+    """prod_{k<n} (v + k) * r2^(n/2), n even, paired as (v + k)(v + n-1-k) = t + k (n-1-k),
+    t = v (v + n - 1): n/2 + 1 multiplications instead of 2 n."""
+    t = v * (v + (n - 1)) * r2
+    p = t
+    for k in range(1, n // 2):
+        p = p * (t + (k * (n - 1 - k)) * r2)
+    return p
+
+
+def _beta1p_parts(a, b):
+    """(E, Q) with B(1 + a, 1 + b) = exp(E) Q; see :func:`log_beta1p`."""
+    a, b = jnp.broadcast_arrays(jnp.asarray(a), jnp.asarray(b))
+    if not jnp.issubdtype(a.dtype, jnp.floating):
+        a, b = a.astype(float), b.astype(float)
+    n, n_terms = _BETA_SERIES[jnp.finfo(a.dtype).bits]
+    # where, not minimum/maximum: at a tie (a = 0, a = b) those pass half the derivative each way
+    a, b = jnp.where(a < 0, 0.0, a), jnp.where(b < 0, 0.0, b)
+    swap = b < a
+    x = 1.0 + jnp.where(swap, b, a)  # x <= y
+    y = 1.0 + jnp.where(swap, a, b)
+    s = x + y
+    big_x, big_y, big_z = x + n, y + n, s + n
+    rx, ry, rz = 1.0 / big_x, 1.0 / big_y, 1.0 / big_z
+    # Shift: Gamma(v) = Gamma(v + n) / prod_k (v + k), k < n, for v = x, y, x + y. With the
+    # n log X and -log(Z) / 2 of the Stirling terms folded in, Q is the bounded
+    # prod_k [X (x + y + k) / ((x + k)(y + k))] / sqrt(Z), each factor in [1, 2 (n + 1)]; the
+    # three products are scaled by X^-n, Y^-n, Y^-n to stay in range.
+    rx2, ry2 = rx * rx, ry * ry
+    q = _rising_scaled(s, ry2, n) / (_rising_scaled(x, rx2, n) * _rising_scaled(y, ry2, n) * jnp.sqrt(big_z))
+    # (X - 1/2) log X + (Y - 1/2) log Y - (Z - 1/2) log Z - n log X + log Z / 2, written so that
+    # no two large terms cancel: log(Y / Z) = log1p(u), u = -x / Z in [-1/2, 0), multiplied by Y,
+    # needs log1p's accuracy when y >> x: log w + (u - (w - 1)) / w, w = 1 + u rounded (w - 1 is
+    # exact; 1 / w = Z / Y). XLA's own log1p costs ~2 logs on CPU (and is off by ~120 ulp for
+    # u < -0.1 in float64). `one` is 1 computed from the data: XLA folds a literal (1 + u) - 1 to u.
+    one = jnp.where(x > 0, 1.0, 0.0).astype(x.dtype)
+    u = -x * rz
+    w = one + u
+    log_yz = jnp.log(w) + (u - (w - one)) * (big_z * ry)
+    e = ((x - 0.5) * jnp.log(big_x * rz) + (big_y - 0.5) * log_yz
+         + (0.5 * math.log(2.0 * math.pi) - n)
+         + _stirling_tail(rx, n_terms) + _stirling_tail(ry, n_terms) - _stirling_tail(rz, n_terms))
+    return e, q
+
+
+def log_beta1p(a, b):
+    """log B(1 + a, 1 + b) = log[Gamma(1 + a) Gamma(1 + b) / Gamma(2 + a + b)], a, b >= 0 finite.
+
+    B(1 + a, 1 + b) = int_0^1 u^a (1 - u)^b du (the height-correlated Smith G2 of a refraction
+    pair, Heitz 2014). One Stirling series (Abramowitz & Stegun 6.1.40) for the three
+    log-Gammas: the arguments are shifted up by 4 (float32) or 8 (float64) integers, the shift
+    products fold into one bounded rational factor, and the large terms are arranged so that
+    none cancel. Cost: two logs, one exp (:func:`beta1p`), four divisions, a sqrt, ~80
+    multiply-adds -- on XLA:CPU about 8x cheaper than ``gammaln(1 + a) + gammaln(1 + b) -
+    gammaln(2 + a + b)``, which moreover cancels in float32 (1e-3 relative error at a + b ~ 1e3,
+    no correct digit by ~1e6).
+    Accuracy (tested against mpmath and scipy): float64 relative error < 1e-12 on [0, 1e8]^2
+    wherever B is a normal number; float32 a few ulp (< 16 eps) times 1 + |log B| (the condition
+    of the exponential). Rounding noise below 0 is harmless (values < 0 are taken as 0).
+    Differentiable; the derivative matches psi(1 + a) - psi(2 + a + b) to ~1e-14 (float64).
+    """
+    e, q = _beta1p_parts(a, b)
+    return e + jnp.log(q)
+
+
+def beta1p(a, b):
+    """B(1 + a, 1 + b) for a, b >= 0 finite (see :func:`log_beta1p`), in [0, 1]."""
+    e, q = _beta1p_parts(a, b)
+    return jnp.exp(e) * q

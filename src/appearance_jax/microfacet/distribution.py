@@ -47,15 +47,15 @@ inputs (safe-where trick).
 from __future__ import annotations
 
 import jax.numpy as jnp
-from jax.scipy.special import gammaln
 
+from ..core.special import beta1p
 from ..core.vec import Vec3, dot, normalize
 from . import beckmann, ggx
 
 KINDS = ("ggx", "beckmann")
 
 # Lambda is clamped here in the transmission Beta function: B(1 + L, 1 + L') <= 1/(1 + L) is
-# then < 1e-8 anyway, and log-Gamma of larger arguments loses all precision in float32.
+# then < 1e-8 anyway (and Lambda's own float32 rounding is no better there).
 _LAMBDA_MAX = 1e8
 
 
@@ -116,8 +116,9 @@ def G2(kind: str, wi: Vec3, wo: Vec3, m: Vec3, ax, ay=None, correlated: bool = T
     Transmission (wi.z wo.z < 0) correlated: B(1 + Lambda_i, 1 + Lambda_o) (Heitz 2014).
     Separable: G1(wi, m) G1(wo, m).
 
-    ``reflection_only=True`` (static) skips the transmission branch: reflection-only models
-    (conductors, coated diffuse) then pay for no log-Gamma evaluations, which jnp.where
+    The Beta function is :func:`~appearance_jax.core.special.beta1p` (one Stirling series, not
+    three log-Gammas). ``reflection_only=True`` (static) skips the transmission branch:
+    reflection-only models (conductors, coated diffuse) then do not pay for it, which jnp.where
     would otherwise compute for every sample.
     """
     ay = _ay(ax, ay)
@@ -134,12 +135,10 @@ def G2(kind: str, wi: Vec3, wo: Vec3, m: Vec3, ax, ay=None, correlated: bool = T
     g_refl = jnp.where(ok, zi * zo / jnp.where(ok, den, 1.0), 0.0)
     if reflection_only:
         return jnp.where(chi & (wi.z * wo.z > 0), g_refl, 0.0)
-    # transmission: Beta function via log-Gamma; Lambda = mu/|z| - 1 (clamped at grazing,
-    # where chi = 0 anyway)
+    # transmission: Beta function; Lambda = mu/|z| - 1 (clamped at grazing, where chi = 0 anyway)
     li = jnp.minimum(mui / jnp.maximum(zi, 1.0 / _LAMBDA_MAX) - 1.0, _LAMBDA_MAX)
     lo = jnp.minimum(muo / jnp.maximum(zo, 1.0 / _LAMBDA_MAX) - 1.0, _LAMBDA_MAX)
-    li, lo = jnp.maximum(li, 0.0), jnp.maximum(lo, 0.0)
-    g_tran = jnp.exp(gammaln(1.0 + li) + gammaln(1.0 + lo) - gammaln(2.0 + li + lo))
+    g_tran = beta1p(li, lo)  # (rounding below 0 is taken as 0 there)
     transmission = wi.z * wo.z < 0
     return jnp.where(chi, jnp.where(transmission, g_tran, g_refl), 0.0)
 
