@@ -1,6 +1,6 @@
 """Throughput of rough_dielectric eval (default height-correlated G2, and separable) vs Mitsuba 3.
 
-    python benchmarks/dielectric_throughput.py [--n 1000000] [--repeats 10] [--devices 2]
+    python benchmarks/dielectric_throughput.py [--n 1000000] [--repeats 10] [--devices 2] [--before]
 
 Prints evaluations per second for appearance-jax (float32, jit, Vec3-of-arrays) with its defaults
 (``shadowing="correlated"``: the height-correlated Smith G2, a Beta function for refraction pairs)
@@ -15,11 +15,13 @@ rough_dielectric docstring); it is divided by |wo.z|.
 The machine may be shared: the implementations are timed alternately, one call each per round, and
 each line is the best of ``--repeats`` rounds after a warm-up (compilation excluded; our compile time
 is printed separately). A sanity check compares our separable values with Mitsuba's on a subset.
+``--before`` adds a line for the correlated G2 with its former Beta function (three ``gammaln``).
 Not a test: nothing here asserts a time.
 """
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numpy as np
@@ -39,19 +41,37 @@ def sphere_pairs(n, seed=0):
     return sphere(), sphere()
 
 
-def jax_evals(wi_np, wo_np, n_devices):
-    """{label: zero-argument callable} for our two G2 forms, and their compile times [s]."""
+def _three_gammaln(a, b):
+    """The transmission Beta function as G2 computed it before issue 20 (three Lanczos gammaln)."""
+    import jax.numpy as jnp
+    from jax.scipy.special import gammaln
+
+    a, b = jnp.maximum(a, 0.0), jnp.maximum(b, 0.0)
+    return jnp.exp(gammaln(1.0 + a) + gammaln(1.0 + b) - gammaln(2.0 + a + b))
+
+
+def jax_evals(wi_np, wo_np, n_devices, before=False):
+    """{label: zero-argument callable} for our G2 forms, and their compile times [s]."""
     import jax
 
     from appearance_jax.bsdf import rough_dielectric as rd
+    from appearance_jax.microfacet import distribution as md
 
     wi, wo = sharded_vec3(wi_np, n_devices), sharded_vec3(wo_np, n_devices)
     calls, compile_s = {}, {}
-    for shadowing in ("correlated", "separable"):
+    variants = [("correlated (default)", "correlated", md.beta1p), ("separable", "separable", md.beta1p)]
+    if before:
+        variants.append(("correlated, 3 gammaln (before)", "correlated", _three_gammaln))
+    for name, shadowing, beta in variants:
         params = rd.Params(alpha=ALPHA, eta=INT_IOR / EXT_IOR, shadowing=shadowing)
         t0 = time.perf_counter()
-        f = jax.jit(rd.eval.kernel).lower(params, wi, wo).compile()
-        label = f"appearance-jax {shadowing}{' (default)' if shadowing == 'correlated' else ''}, {n_devices} dev"
+        saved, md.beta1p = md.beta1p, beta  # G2 looks it up when traced
+        try:
+            # a fresh function object per variant: jit's trace cache is keyed on it
+            f = jax.jit(lambda p, wi, wo: rd.eval.kernel(p, wi, wo)).lower(params, wi, wo).compile()
+        finally:
+            md.beta1p = saved
+        label = f"appearance-jax {name}, {n_devices} dev"
         compile_s[label] = time.perf_counter() - t0
         calls[label] = (lambda f=f, p=params: f(p, wi, wo).block_until_ready())
     return calls, compile_s
@@ -109,11 +129,13 @@ def sanity_check(wi_np, wo_np, mitsuba_values, m=4096):
 
 
 def main():
+    before = "--before" in sys.argv  # this script's own flag (the common ones: throughput_args)
+    sys.argv = [a for a in sys.argv if a != "--before"]
     args = throughput_args(__doc__)
     wi, wo = sphere_pairs(args.n)
     calls, compile_s = {}, {}
     for nd in sorted({1, args.devices}):
-        c, cs = jax_evals(wi, wo, nd)
+        c, cs = jax_evals(wi, wo, nd, before)
         calls.update(c)
         compile_s.update(cs)
     run_m, values_m, mv = mitsuba_eval(wi, wo)
