@@ -79,6 +79,9 @@ def forward_jacobian_rule(f: Callable, max_scalars: int = MAX_SCALARS) -> Callab
             return out, jax.tree.map(jnp.zeros_like, out)
         if n > max_scalars:
             return jax.jvp(f_of, x, tx)
+        if n == 1:  # one column: a plain JVP (measured faster than a vmap of size 1)
+            out, col = jax.jvp(f_of, x, (jnp.ones_like(x[0]),))
+            return out, jax.tree.map(lambda c: jnp.reshape(tx[0], ()).astype(c.dtype) * c, col)
         # basis tangents: column j of the identity, split over the moving leaves
         eye, basis, start = jnp.eye(n), [], 0
         for v in x:
