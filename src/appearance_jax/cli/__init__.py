@@ -24,6 +24,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser().parse_args(argv)
     args._argv = argv
+    _compile_cache(args)
     try:
         return args.fn(args)
     except (ValueError, KeyError, FileNotFoundError, IsADirectoryError) as e:
@@ -41,3 +42,14 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # a file that could not be read or written (permissions, disk full)
         print(f"appearance-jax {args.cmd}: error: {e}", file=sys.stderr)
         return EXIT_FAILURE
+
+
+def _compile_cache(args) -> None:
+    """The on-disk cache of compiled programs: on unless ``--no-compile-cache`` (or the
+    environment, :mod:`appearance_jax.core.compile_cache`) turns it off."""
+    from ..core import compile_cache
+
+    if getattr(args, "no_compile_cache", False):
+        compile_cache.disable()
+    else:
+        compile_cache.ensure()

@@ -62,5 +62,10 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
     for module in COMMANDS:
         module.add_parser(sub)
+    for command in sub.choices.values():
+        command.add_argument("--no-compile-cache", action="store_true",
+                             help="do not read or write the on-disk cache of compiled programs (default: on, in "
+                                  "$APPEARANCE_JAX_COMPILE_CACHE or ~/.cache/appearance-jax/xla; "
+                                  "APPEARANCE_JAX_COMPILE_CACHE=off also turns it off)")
     sub.help = "one of: " + ", ".join(sub.choices)
     return p

@@ -27,6 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ...core import compile_cache
 from ..tables.table import Table
 from .problem import build_problem, entry_arrays
 from . import uncertainty as unc
@@ -109,6 +110,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
+    compile_cache.ensure()
     values = np.asarray(values, np.float64)
     if values.ndim != 3 or values.shape[1:] != table.values.shape:
         raise ValueError(f"fit_batch: values must have shape (K, {table.n_samples}, {table.n_bands}), got {values.shape}")

@@ -288,7 +288,8 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     bound, flat = flags(sp, x, raw, [out[method]], exact)
     params = sp.params_from_x(jnp.asarray(x))
     w = np.asarray(data["weight"]) > 0
-    fitted = np.asarray(problem.evaluate(params, data), np.float64)
+    # jitted: op by op, a coated model's eval would compile dozens of small programs
+    fitted = np.asarray(jax.jit(problem.evaluate)(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))
     m = int(w.sum())
     diag = lambda c: np.sqrt(np.abs(np.diag(np.asarray(c, np.float64))))  # noqa: E731

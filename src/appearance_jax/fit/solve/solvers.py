@@ -10,6 +10,10 @@ works in the unconstrained space of :mod:`~appearance_jax.fit.solve.transforms`;
 is one jitted XLA program, so ``n_starts`` random starts (multi-start for multimodal losses)
 run batched with ``vmap`` and the best one is kept.
 
+Compiled solves are kept in JAX's persistent compilation cache on disk, turned on by default
+(:mod:`appearance_jax.core.compile_cache`: where, and how to turn it off), so a re-run of the
+same fit in a new process loads the program instead of compiling it.
+
 Stochastic models (Monte Carlo evaluators that take a PRNG ``key``) are fitted with common
 random numbers: pass ``key=``; the same key is used at every iterate, so the residual is a
 smooth deterministic function of the parameters and the Jacobian is consistent
@@ -29,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ...core import compile_cache
 from ..tables.table import Table
 from .problem import Problem, build_problem, start_params
 from . import uncertainty as unc
@@ -139,6 +144,7 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     """
     if solver not in SOLVERS:
         raise ValueError(f"solver = {solver!r}: must be one of {', '.join(SOLVERS)}")
+    compile_cache.ensure()
     if n_starts < 1:
         raise ValueError(f"n_starts = {n_starts} must be >= 1")
     if bootstrap != 0:
