@@ -197,14 +197,16 @@ def _beta1p_parts(a, b):
     rx2, ry2 = rx * rx, ry * ry
     q = _rising_scaled(s, ry2, n) / (_rising_scaled(x, rx2, n) * _rising_scaled(y, ry2, n) * jnp.sqrt(big_z))
     # (X - 1/2) log X + (Y - 1/2) log Y - (Z - 1/2) log Z - n log X + log Z / 2, written so that
-    # no two large terms cancel: log(Y / Z) = log1p(u), u = -x / Z in [-1/2, 0), multiplied by Y,
-    # needs log1p's accuracy when y >> x: log w + (u - (w - 1)) / w, w = 1 + u rounded (w - 1 is
-    # exact; 1 / w = Z / Y). XLA's own log1p costs ~2 logs on CPU (and is off by ~120 ulp for
-    # u < -0.1 in float64). `one` is 1 computed from the data: XLA folds a literal (1 + u) - 1 to u.
-    one = jnp.where(x > 0, 1.0, 0.0).astype(x.dtype)
-    u = -x * rz
-    w = one + u
-    log_yz = jnp.log(w) + (u - (w - one)) * (big_z * ry)
+    # no two large terms cancel. log(Y / Z) is multiplied by Y and must be accurate when y >> x
+    # (Y / Z -> 1): with t = x / (Z + Y) in (0, 1/3] (x <= y), Y / Z = (1 - t) / (1 + t) and
+    # log(Y / Z) = -2 atanh(t), whose Taylor series in t^2 <= 1/9 is cheaper than a log here.
+    t = x / (big_z + big_y)
+    t2 = t * t
+    n_atanh = 17 if n_terms > 3 else 7
+    poly = 1.0 / (2 * n_atanh - 1)
+    for k in range(n_atanh - 2, -1, -1):
+        poly = poly * t2 + 1.0 / (2 * k + 1)
+    log_yz = -2.0 * t * poly
     e = ((x - 0.5) * jnp.log(big_x * rz) + (big_y - 0.5) * log_yz
          + (0.5 * math.log(2.0 * math.pi) - n)
          + _stirling_tail(rx, n_terms) + _stirling_tail(ry, n_terms) - _stirling_tail(rz, n_terms))
