@@ -22,17 +22,26 @@ external transmittance and R_int the cosine average of its reflectance seen from
 single-scattering integrals over the visible normals with the separable Smith G1, as in
 Mitsuba (:mod:`appearance_jax.microfacet.interface_integrals`): light masked by the
 microsurface is lost, so the albedo is < 1 even for a white base (about 0.55 at
-alpha = 0.5). Both depend only on (alpha, eta, distribution); they are computed **inside**
-the jitted function (differentiable in alpha and eta, float32 or float64), once per
-parameter set (:func:`coat_tables`), then looked up per direction. Spatially varying
-alpha / eta (leading axes) cost one set of tables per element.
+alpha = 0.5). Both depend only on (alpha, eta, distribution): once per parameter set
+(:func:`coat_tables`; differentiable in alpha and eta, float32 or float64) they give T as
+64 Chebyshev coefficients in sqrt(mu) (or Mitsuba's 64 node values), then looked up per
+direction. Spatially varying alpha / eta (leading axes) cost one set of tables per element.
 
-``tables`` chooses how T(mu) and R_int are discretised:
+``tables`` chooses how T(mu) and R_int are obtained:
 
-- ``"accurate"`` (default): T is a Chebyshev interpolant on 64 nodes in sqrt(mu), R_int a
+- ``"precomputed"`` (default): the ``"accurate"`` integrals, computed once by this
+  project's quadrature on a grid over (ln alpha, eta) and shipped with the package
+  (:mod:`appearance_jax.microfacet.coat_tables`), interpolated by a cubic B-spline (C2 in
+  alpha and eta). Measured error against ``"accurate"``: <= 8e-5 absolute for T(mu) and
+  R_int over the whole parameter range; derivatives w.r.t. alpha and eta within ~1e-3
+  relative away from the corner eta -> 1, alpha -> 1e-3 (docs/microfacet.md). Cost: a
+  4 x 4 spline lookup per parameter set.
+- ``"accurate"``: the quadrature inside the jitted function (~5e5 integrand evaluations
+  per parameter set): T is a Chebyshev interpolant on 64 nodes in sqrt(mu), R_int a
   Gauss-Legendre integral over mu split at the critical cosine.
 - ``"mitsuba"``: Mitsuba 3's discretisation (T linear in mu between 64 equispaced nodes,
-  R_int an equal-weight mean over them, about 1% low); use it to reproduce Mitsuba.
+  R_int an equal-weight mean over them, about 1% low), by the same quadrature; use it to
+  reproduce Mitsuba.
 
 Sampling (as Mitsuba): the specular lobe (visible normals of wi, then mirror) with
 probability P_s = (1 - T_i) w_s / ((1 - T_i) w_s + T_i (1 - w_s)), w_s = mean(k_s) /
@@ -40,16 +49,16 @@ probability P_s = (1 - T_i) w_s / ((1 - T_i) w_s + T_i (1 - w_s)), w_s = mean(k_
 pdf = P_s D(h) G1(wi, h) / (4 cos theta_i) + (1 - P_s) cos theta_o / pi. ``sample`` takes a
 PRNG key or 3 uniform arrays (lobe choice, then two for the direction).
 
-| parameter            | default      | range                  | unit | meaning                                       |
-|----------------------|--------------|------------------------|------|-----------------------------------------------|
-| alpha                | 0.1          | [1e-3, 2]              | 1    | coat roughness (isotropic)                    |
-| diffuse_reflectance  | 0.5          | [0, 1]                 | 1    | albedo rho of the base, per band              |
-| specular_reflectance | 1            | [0, 1]                 | 1    | scale k_s of the coat reflection, per band    |
-| eta                  | 1.5          | [1, 3]                 | 1    | relative index eta_coat / eta_exterior        |
-| distribution         | "ggx"        | ggx, beckmann          | -    | microfacet normal distribution                |
-| nonlinear            | False        | False, True            | -    | tint every internal bounce (r = rho)          |
-| shadowing            | "correlated" | correlated, separable  | -    | Smith G2 of the specular lobe                 |
-| tables               | "accurate"   | accurate, mitsuba      | -    | discretisation of T(mu) and R_int (see above) |
+| parameter            | default       | range                          | unit | meaning                                      |
+|----------------------|---------------|--------------------------------|------|----------------------------------------------|
+| alpha                | 0.1           | [1e-3, 2]                      | 1    | coat roughness (isotropic)                   |
+| diffuse_reflectance  | 0.5           | [0, 1]                         | 1    | albedo rho of the base, per band             |
+| specular_reflectance | 1             | [0, 1]                         | 1    | scale k_s of the coat reflection, per band   |
+| eta                  | 1.5           | [1, 3]                         | 1    | relative index eta_coat / eta_exterior       |
+| distribution         | "ggx"         | ggx, beckmann                  | -    | microfacet normal distribution               |
+| nonlinear            | False         | False, True                    | -    | tint every internal bounce (r = rho)         |
+| shadowing            | "correlated"  | correlated, separable          | -    | Smith G2 of the specular lobe                |
+| tables               | "precomputed" | precomputed, accurate, mitsuba | -    | how T(mu) and R_int are obtained (see above) |
 
 Range of eta: 1 (index-matched coat: no specular lobe, T = G1, R_int = 0, the limit of a
 bare rough diffuse base) to 3 (beyond rutile TiO2, n ~ 2.6-2.9, the densest coating
@@ -89,9 +98,11 @@ from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import Bands, param, params_class, Real, static
 from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
+from ..microfacet import coat_tables as ct
 from ..microfacet import distribution as md
 from ..microfacet import interface_integrals as ii
-from ..microfacet.interface_integrals import TABLES, CoatTables
+from ..microfacet.coat_tables import TABLES
+from ..microfacet.interface_integrals import CoatTables
 from ..optics.fresnel import fresnel_dielectric
 
 
@@ -104,11 +115,11 @@ class Params:
     distribution: str = static("ggx", choices=md.KINDS, doc="microfacet normal distribution")
     nonlinear: bool = static(False, choices=(False, True), doc="tint every internal bounce by the base albedo")
     shadowing: str = static("correlated", choices=("correlated", "separable"), doc="Smith G2 of the specular lobe")
-    tables: str = static("accurate", choices=TABLES, doc="discretisation of the coat integrals T(mu), R_int")
+    tables: str = static("precomputed", choices=TABLES, doc="how the coat integrals T(mu), R_int are obtained")
 
 
 def _tables(p: Params) -> CoatTables:
-    return ii.tabulate(p.distribution, p.alpha, p.eta, p.tables)
+    return ct.tabulate(p.distribution, p.alpha, p.eta, p.tables)
 
 
 def coat_tables(p: Params) -> CoatTables:

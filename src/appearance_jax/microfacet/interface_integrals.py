@@ -268,16 +268,17 @@ def _chebyshev_nodes(n: int):
 
 
 def _clenshaw(coefs, x):
-    """sum_k c_k T_k(x) for coefs (..., n) and x broadcasting against the leading axes."""
-    cs = jnp.moveaxis(coefs, -1, 0)[::-1]
+    """sum_k c_k T_k(x) for coefs (..., n) and x broadcasting against the leading axes.
 
-    def step(carry, ck):
-        b1, b2 = carry
-        return (2.0 * x * b1 - b2 + ck, b1), None
-
-    zero = jnp.zeros(jnp.broadcast_shapes(jnp.shape(x), cs.shape[1:]), dtype=jnp.result_type(x, cs))
-    (b1, b2), _ = jax.lax.scan(step, (zero, zero), cs[:-1])
-    return x * b1 - b2 + cs[-1]
+    Unrolled (not a lax.scan): XLA fuses the 2n multiply-adds per direction into one
+    elementwise loop, where a scan makes n passes over the direction arrays (~10x slower
+    on CPU for 1e6 directions)."""
+    n = coefs.shape[-1]
+    x2 = 2.0 * x
+    b1 = b2 = jnp.zeros((), jnp.result_type(x, coefs))
+    for k in range(n - 1, 0, -1):
+        b1, b2 = x2 * b1 - b2 + coefs[..., k], b1
+    return x * b1 - b2 + coefs[..., 0]
 
 
 def tabulate(kind: str, alpha, eta, scheme: str = "accurate") -> CoatTables:
