@@ -33,6 +33,11 @@ and D overflows its useful range, so a smooth (delta) conductor should be used i
 above 2 (mean facet slope > 60 deg) the Smith microsurface model is far outside the range
 of measured materials, and fits that run there are better served by a diffuse term.
 
+Derivatives: ``eval`` carries :func:`~appearance_jax.core.autodiff.forward_jacobian_rule`, so
+a reverse-mode gradient with respect to one scalar (alpha, say) costs one forward-mode pass
+and stores one output-sized column instead of the whole graph; with respect to more inputs
+it is JAX's native reverse mode. ``eval.kernel.unwrapped`` is the kernel without the rule.
+
 Differences from Mitsuba 3's ``roughconductor``: Mitsuba defaults to ``beckmann`` and always
 uses the separable Smith G (``shadowing="separable"`` here); its Beckmann G1 is Walter's
 rational approximation (rel. error < 0.35%) where we use the exact erf form; its ``eval``
