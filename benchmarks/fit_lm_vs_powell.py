@@ -15,12 +15,25 @@ and final loss:
   on the same compiled kernel, not on Python overhead), xtol = ftol = 1e-10, up to 20000
   evaluations.
 
-    python3 benchmarks/fit_lm_vs_powell.py
+    python3 benchmarks/fit_lm_vs_powell.py             # one process, in-process figures
+    python3 benchmarks/fit_lm_vs_powell.py --processes # end to end: a cold then a warm process per model
+
+End to end (``--processes``): each model is fitted in two fresh Python processes sharing a new,
+empty persistent compilation cache (``appearance_jax.core.compile_cache``): the first compiles
+and writes it (cold), the second reads it (warm). "LM total" is the whole ``fit()`` call
+(problem set-up, compilation or cache load, solve, covariances and error metrics); "Powell
+total" is the compilation of its loss plus its solve. The JAX backend is initialised before
+either is timed, so neither pays for it.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
 import time
 
 import jax
@@ -62,9 +75,12 @@ def run(name: str):
     table = make_table(model, model.Params(**truth_kw))
     start = model.Params(**start_kw)
 
+    jnp.zeros(1).block_until_ready()  # backend initialised before anything is timed
+    t0 = time.perf_counter()
     res = fit(model, table, init=start, fix=fix, metric="l2")
+    total = time.perf_counter() - t0
     lm = dict(iterations=res.iterations, evals="-", time=res.wall_time, compile=res.compile_time,
-              loss=0.5 * res.loss * res.n_valid, x=res.x)
+              loss=0.5 * res.loss * res.n_valid, x=res.x, total=total)
 
     prob = build_problem(model, table, init=start, fix=fix, metric="l2")
     sp = prob.space
@@ -83,15 +99,49 @@ def run(name: str):
     t0 = time.perf_counter()
     opt = minimize(objective, x0, method="Powell", bounds=bounds,
                    options=dict(xtol=1e-10, ftol=1e-10, maxfev=20000))
-    powell = dict(iterations=opt.nit, evals=count[0], time=time.perf_counter() - t0, compile=compile_powell,
-                  loss=float(opt.fun), x=opt.x)
+    solve = time.perf_counter() - t0
+    powell = dict(iterations=opt.nit, evals=count[0], time=solve, compile=compile_powell,
+                  loss=float(opt.fun), x=opt.x, total=compile_powell + solve)
     return sp.labels, lm, powell
+
+
+def child(name):
+    labels, lm, pw = run(name)
+    out = {k: {q: (v.tolist() if isinstance(v, np.ndarray) else v) for q, v in r.items()} for k, r in
+           (("lm", lm), ("powell", pw))}
+    print("RESULT " + json.dumps(out))
+
+
+def processes(names):
+    print("end to end, one fresh process per run; cold = empty persistent cache, warm = the cache the cold run wrote")
+    print("| model | run | LM total [s] | LM compile [s] | LM solve [s] | Powell total [s] | Powell solve [s] "
+          "| Powell / LM (total) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for name in names:
+        with tempfile.TemporaryDirectory() as cache:
+            env = dict(os.environ, APPEARANCE_JAX_COMPILE_CACHE=cache)
+            for run_name in ("cold", "warm"):
+                out = subprocess.run([sys.executable, __file__, "--child", name], capture_output=True, text=True,
+                                     env=env, timeout=1800)
+                line = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
+                if not line:
+                    raise RuntimeError(out.stderr[-3000:])
+                r = json.loads(line[0][7:])
+                lm, pw = r["lm"], r["powell"]
+                print(f"| {name} | {run_name} | {lm['total']:.2f} | {lm['compile']:.2f} | {lm['time']:.3f} "
+                      f"| {pw['total']:.2f} | {pw['time']:.3f} | {pw['total'] / lm['total']:.2f} |", flush=True)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", nargs="*", default=list(CASES))
+    ap.add_argument("--processes", action="store_true", help="end to end in a cold and a warm process per model")
+    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args()
+    if args.child:
+        return child(args.child)
+    if args.processes:
+        return processes(args.models)
     for name in args.models:
         labels, lm, pw = run(name)
         print(f"\n{name}: free parameters {', '.join(labels)}")
@@ -100,7 +150,8 @@ def main():
             print(f"  {label:<22} {r['iterations']:>10} {str(r['evals']):>10} {r['time']:>9.3f} {r['compile']:>11.2f}"
                   f" {r['loss']:>14.8g}")
         print(f"  ratio Powell/LM time: {pw['time'] / lm['time']:.1f}x (solve only), "
-              f"{(pw['time'] + pw['compile']) / (lm['time'] + lm['compile']):.1f}x (incl. compile)")
+              f"{(pw['time'] + pw['compile']) / (lm['time'] + lm['compile']):.1f}x (incl. compile), "
+              f"{pw['total'] / lm['total']:.2f}x (whole fit() incl. covariances vs Powell incl. compile)")
         print(f"  loss Powell - LM: {pw['loss'] - lm['loss']:.3e};  max |x_Powell - x_LM| = "
               f"{np.max(np.abs(pw['x'] - lm['x'])):.2e}")
 
