@@ -1,12 +1,36 @@
-"""Test-wide settings: float64 everywhere (DESIGN.md: tests that need it run in x64), and a
-bound on the memory mappings that compiled XLA executables hold."""
+"""Test-wide settings: float64 everywhere (DESIGN.md: tests that need it run in x64), a bound
+on the memory mappings that compiled XLA executables hold, and one persistent compilation
+cache shared by the workers of a run."""
 
 import gc
+import os
+import shutil
+import tempfile
 
 import jax
 import pytest
 
 jax.config.update("jax_enable_x64", True)
+
+# One on-disk compilation cache per test run (appearance_jax.core.compile_cache), shared by the
+# pytest-xdist workers: a program compiled by one worker (a module fixture's fit, a model's
+# eval, the README's fit run in a subprocess) is loaded by the other instead of compiled again.
+# The controller creates it before the workers start (they inherit the environment) and removes
+# it at the end, so no run reads another run's programs. A directory given in the environment
+# (or APPEARANCE_JAX_COMPILE_CACHE=off) is used as it is and kept.
+_RUN_CACHE = None
+if "APPEARANCE_JAX_COMPILE_CACHE" not in os.environ:
+    _RUN_CACHE = tempfile.mkdtemp(prefix="appearance-jax-test-xla-")
+    os.environ["APPEARANCE_JAX_COMPILE_CACHE"] = _RUN_CACHE
+
+from appearance_jax.core import compile_cache  # noqa: E402
+
+compile_cache.ensure()
+
+
+def pytest_unconfigure(config):
+    if _RUN_CACHE is not None and not hasattr(config, "workerinput"):  # the controller (or a plain run)
+        shutil.rmtree(_RUN_CACHE, ignore_errors=True)
 
 # Every XLA:CPU executable JIT-compiled by LLVM keeps ~3 memory mappings alive while JAX
 # caches it. A long-lived pytest-xdist worker compiles tens of thousands of them (tests/bsdf
