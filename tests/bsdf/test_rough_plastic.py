@@ -348,7 +348,9 @@ def test_gradients_match_finite_differences_mitsuba_scheme():
 
 @pytest.mark.parametrize("static", [STATIC_A, pytest.param(STATIC_B, marks=pytest.mark.slow)], ids=["A", "B"])
 def test_spatially_varying_parameters_broadcast(static):
-    """alpha, eta with a leading axis (one coat per direction) = separate scalar evaluations."""
+    """alpha, eta with a leading axis (one coat per direction) = separate scalar evaluations
+    (precomputed tables: a scalar set is looked up through its resampled table, a batch of sets
+    through the Chebyshev series, equal within the resampling error <= 5e-5 in T)."""
     alphas, etas = jnp.array([0.05, 0.3, 1.0]), jnp.array([1.2, 1.5, 2.5])
     wi = spherical_direction(jnp.array([0.1, 0.8, 1.3]), 0.0)
     wo = spherical_direction(jnp.array([0.5, 0.3, 1.0]), jnp.array([3.0, 1.0, 2.0]))
@@ -359,7 +361,8 @@ def test_spatially_varying_parameters_broadcast(static):
     for i in range(3):
         q = rp.Params(alpha=float(alphas[i]), eta=float(etas[i]), diffuse_reflectance=(0.2, 0.7), **static)
         wi1, wo1 = Vec3(*(c[i] for c in wi)), Vec3(*(c[i] for c in wo))
-        np.testing.assert_allclose(f[i], np.asarray(rp.eval(q, wi1, wo1)), rtol=1e-12)
+        rtol = 2e-4 if q.tables == "precomputed" else 1e-12
+        np.testing.assert_allclose(f[i], np.asarray(rp.eval(q, wi1, wo1)), rtol=rtol)
         if with_pdf:
             np.testing.assert_allclose(pdf[i], np.asarray(rp.pdf(q, wi1, wo1)), rtol=1e-12)
 

@@ -100,7 +100,6 @@ from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
 from ..microfacet import coat_tables as ct
 from ..microfacet import distribution as md
-from ..microfacet import interface_integrals as ii
 from ..microfacet.coat_tables import TABLES
 from ..microfacet.interface_integrals import CoatTables
 from ..optics.fresnel import fresnel_dielectric
@@ -129,7 +128,7 @@ def coat_tables(p: Params) -> CoatTables:
 
 def _transmittance_at(p: Params, tab: CoatTables, mu):
     """T(mu) from the tables, for mu in [0, 1] (any shape broadcasting with the params)."""
-    return ii.transmittance_at(p.tables, tab, mu)
+    return ct.transmittance_at(p.tables, tab, mu)
 
 
 # ----------------------------------------------------------------------------------------
@@ -171,8 +170,9 @@ def _eval_with(p: Params, tab: CoatTables, wi: Vec3, wo: Vec3):
     ok = active & (den > 0)
     # safe-where: the masked branch divides by 1, so gradients stay finite at grazing
     spec = jnp.where(ok, F * D * G / jnp.where(ok, den, 1.0), 0.0)
-    T_i = _transmittance_at(p, tab, wi.z)
-    T_o = _transmittance_at(p, tab, wo.z)
+    transmittance = ct.transmittance_lookup(p.tables, tab)  # resampled once, looked up twice
+    T_i = transmittance(wi.z)
+    T_o = transmittance(wo.z)
     rho = as_bands(p.diffuse_reflectance)
     r = rho if p.nonlinear else 1.0
     diff = rho / (1.0 - r * with_bands(tab.internal_reflectance))

@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import interface_integrals as ii
+from ..core.special import safe_sqrt
 from .interface_integrals import CoatTables, N_CHEB
 
 TABLES = ("precomputed",) + ii.TABLES
@@ -48,6 +49,7 @@ ETA_SLOPE = 2.0  # linear part of the eta coordinate: resolution at large eta
 N_U = 48  # grid nodes in ln(alpha)
 N_W = 64  # grid nodes in the eta coordinate
 N_VALUES = N_CHEB + 1  # the Chebyshev coefficients of T, then R_int
+N_RESAMPLE = 4096  # cells of the per-direction lookup table, uniform in sqrt(mu)
 FILE_FORMAT = 1
 FILE_PARTS = ("coat_tables", "coat_tables.npz")
 
@@ -174,15 +176,9 @@ def _interpolate_one(coefs, x, y):
     return jnp.einsum("a,b,abk->k", wx, wy, block)
 
 
-def interpolate(kind: str, alpha, eta) -> CoatTables:
-    """The precomputed coat integrals at (alpha, eta) (leading axes broadcast): Chebyshev
-    coefficients of T in sqrt(mu) (..., 64) and R_int (...), as ``tabulate(..., "accurate")``
-    up to the interpolation error (docs/microfacet.md). Differentiable in alpha and eta."""
-    if kind not in KINDS:
-        raise ValueError(f"coat tables: distribution {kind!r} not in {KINDS}")
-    dtype = jnp.result_type(alpha, eta, float)
-    alpha = jnp.asarray(alpha, dtype)
-    eta = jnp.asarray(eta, dtype)
+@functools.partial(jax.jit, static_argnames="kind")
+def _interpolate(kind: str, alpha, eta):
+    dtype = jnp.result_type(alpha, eta)
     shape = jnp.broadcast_shapes(alpha.shape, eta.shape)
     coefs = jnp.asarray(load()[kind], dtype)
     # Python floats (weak types): float32 inputs stay float32
@@ -195,6 +191,17 @@ def interpolate(kind: str, alpha, eta) -> CoatTables:
     return CoatTables(v[..., :N_CHEB], v[..., N_CHEB])
 
 
+def interpolate(kind: str, alpha, eta) -> CoatTables:
+    """The precomputed coat integrals at (alpha, eta) (leading axes broadcast): Chebyshev
+    coefficients of T in sqrt(mu) (..., 64) and R_int (...), as ``tabulate(..., "accurate")``
+    up to the interpolation error (docs/microfacet.md). Differentiable in alpha and eta."""
+    if kind not in KINDS:
+        raise ValueError(f"coat tables: distribution {kind!r} not in {KINDS}")
+    dtype = jnp.result_type(alpha, eta, float)
+    load()  # a bad file raises here, eagerly, not inside a trace
+    return _interpolate(kind, jnp.asarray(alpha, dtype), jnp.asarray(eta, dtype))
+
+
 def tabulate(kind: str, alpha, eta, scheme: str = "precomputed") -> CoatTables:
     """The coat integrals of a rough interface in any scheme of :data:`TABLES`:
     ``"precomputed"`` (:func:`interpolate`), or the quadrature schemes of
@@ -204,3 +211,44 @@ def tabulate(kind: str, alpha, eta, scheme: str = "precomputed") -> CoatTables:
     if scheme == "precomputed":
         return interpolate(kind, alpha, eta)
     return ii.tabulate(kind, alpha, eta, scheme)
+
+
+@functools.lru_cache(maxsize=None)
+def _resampling_matrix():
+    """(N_RESAMPLE + 1, N_CHEB): Chebyshev coefficients -> T at s = k / N_RESAMPLE (numpy)."""
+    s = np.linspace(0.0, 1.0, N_RESAMPLE + 1)
+    return np.polynomial.chebyshev.chebvander(2.0 * s - 1.0, N_CHEB - 1)
+
+
+def transmittance_lookup(scheme: str, tab: CoatTables):
+    """A function mu -> T(mu) for tables of ``scheme`` (mu in [0, 1], any shape broadcasting
+    with the tables' leading axes).
+
+    ``"precomputed"`` tables of one parameter set (no leading axes, also per item inside a
+    vmap) are resampled once on N_RESAMPLE + 1 nodes uniform in s = sqrt(mu) and looked up
+    by linear interpolation in s: two gathers per direction instead of a 64-term Chebyshev
+    series (~4x faster on CPU for 1e6 directions; measured error of the resampling
+    <= 5e-5, docs/microfacet.md). With leading axes (spatially varying alpha, eta) and for
+    the quadrature schemes: :func:`~appearance_jax.microfacet.interface_integrals.transmittance_at`.
+    """
+    T = tab.transmittance
+    if scheme != "precomputed" or T.ndim != 1:
+        return lambda mu: ii.transmittance_at("accurate" if scheme == "precomputed" else scheme, tab, mu)
+    # a matrix product, which XLA materialises (a Clenshaw series here would be fused into
+    # the gathers and summed per direction again, ~10x slower)
+    nodes = jnp.clip(jnp.asarray(_resampling_matrix(), T.dtype) @ T, 0.0, 1.0)
+
+    def lookup(mu):
+        x = safe_sqrt(jnp.clip(mu, 0.0, 1.0)) * N_RESAMPLE
+        i = jnp.minimum(jnp.floor(x), N_RESAMPLE - 1.0)
+        t = x - i
+        i = i.astype(jnp.int32)
+        v0, v1 = nodes[i], nodes[i + 1]
+        return v0 + t * (v1 - v0)
+
+    return lookup
+
+
+def transmittance_at(scheme: str, tab: CoatTables, mu):
+    """T(mu) from tables of any scheme of :data:`TABLES` (see :func:`transmittance_lookup`)."""
+    return transmittance_lookup(scheme, tab)(mu)

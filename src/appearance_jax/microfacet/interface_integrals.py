@@ -267,7 +267,7 @@ def _chebyshev_nodes(n: int):
     return 0.5 * (x + 1.0), M
 
 
-def _clenshaw(coefs, x):
+def chebyshev_series(coefs, x):
     """sum_k c_k T_k(x) for coefs (..., n) and x broadcasting against the leading axes.
 
     Unrolled (not a lax.scan): XLA fuses the 2n multiply-adds per direction into one
@@ -327,4 +327,4 @@ def transmittance_at(scheme: str, tab: CoatTables, mu):
         return v0 + frac * (v1 - v0)
     # Chebyshev series in s = sqrt(mu), x = 2 s - 1; clipped to [0, 1] so that an
     # interpolation ripple (~1e-6) near T = 1 cannot make a lobe probability negative
-    return jnp.clip(_clenshaw(T, 2.0 * safe_sqrt(mu) - 1.0), 0.0, 1.0)
+    return jnp.clip(chebyshev_series(T, 2.0 * safe_sqrt(mu) - 1.0), 0.0, 1.0)
