@@ -28,6 +28,9 @@ def test_shipped_data_is_installed_with_provenance():
     names = {p.name for p in folder.iterdir()}
     assert "SOURCES.txt" in names and "LICENSE-CC0.txt" in names
     assert len([n for n in names if n.endswith(".yml")]) >= 20
+    # rough_plastic's precomputed coat tables (microfacet/coat_tables.py reads them)
+    coat = {p.name for p in data.path("coat_tables").iterdir()}
+    assert {"coat_tables.npz", "PROVENANCE.md"} <= coat
 
 
 def test_cli_lists_models_with_parameter_tables(capsys):
