@@ -59,8 +59,9 @@ def add_parser(subparsers) -> None:
                             "default) or >= 2 (64 is a good start; seeded by --seed)")
     p.add_argument("--ignore-sigma", action="store_true", help="do not weight by the table's uncertainties")
     p.add_argument("--float32", action="store_true", help="fit in float32 (default: float64)")
-    p.add_argument("--progress-every", type=int, default=10, metavar="K",
-                   help="print the loss every K steps, >= 0 (0: silent; default 10)")
+    p.add_argument("--progress-every", type=int, default=0, metavar="K",
+                   help="print the loss every K steps, >= 0 (default 0: silent; a solve that prints cannot be "
+                        "kept in the compile cache, so it compiles on every run)")
     p.add_argument("--no-plots", action="store_true", help="write params.json and residuals.csv only")
     p.add_argument("--out", default="out/fit", metavar="DIR", help="report folder, created if needed (default out/fit)")
     p.add_argument("--quiet", action="store_true", help="print only the result, warnings, the files and the status")
@@ -151,7 +152,7 @@ def _fit(args, plan) -> int:
         f"{'float32' if args.float32 else 'float64'})")
     if kw["fix"]:
         say(_fixed_line(kw["fix"], origin))
-    say("compiling the solve with XLA (one-off, can take tens of seconds) ...")
+    say("compiling the solve with XLA (or loading it from the compile cache) ...")
     result = solve.fit(model, table, **kw)
     print(result.summary(), flush=True)
     argv = list(getattr(args, "_argv", []))
