@@ -19,6 +19,7 @@ desired colour.
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from ..core.frame import Frame
@@ -32,6 +33,25 @@ EUMELANIN_RGB = (0.419, 0.697, 1.37)
 PHEOMELANIN_RGB = (0.187, 0.4, 1.05)
 # wavelengths (nm) of the RGB channels in the spectral form (Huang 2022's code)
 RGB_WAVELENGTHS_NM = (612.0, 549.0, 465.0)
+
+
+def materialize(tree):
+    """The arrays of ``tree`` unchanged (bit for bit), computed once and stored.
+
+    XLA:CPU fuses a chain of cheap elementwise ops (+, *, select, compare) into *every*
+    consumer, so a value used by several fusions is recomputed, and compiled, once per
+    consumer: in the hair kernels, with Vec3 components and per-direction values broadcast
+    over (nodes, paths), this duplicated the generated code 4-7x and made the compile slow.
+    It never duplicates a divide, so dividing by a 1 that the compiler cannot fold (it comes
+    out of an optimisation barrier) ends the chain: one store, one fused kernel. x / 1 = x
+    exactly; integer and boolean leaves are passed through."""
+    one = jax.lax.optimization_barrier(jnp.ones((), jnp.result_type(float)))
+
+    def one_div(v):
+        v = jnp.asarray(v)
+        return (v / one.astype(v.dtype)) if jnp.issubdtype(v.dtype, jnp.inexact) else v
+
+    return jax.tree.map(one_div, tree)
 
 
 def wrap_pi(x):
@@ -150,14 +170,13 @@ def visible_gamma_interval(theta, phi, tilt, b):
     (spec seed-001 §1.3.3). Returns (lo, hi) with hi >= lo (empty: hi = lo) and lo unwrapped
     near gamma(phi)."""
     c = jnp.maximum(0.0, -jnp.tan(tilt) * jnp.tan(theta))
-    w = safe_acos(jnp.minimum(c, 1.0))
-    gc = to_gamma(phi, b)
+    w, gc = materialize((safe_acos(jnp.minimum(c, 1.0)), to_gamma(phi, b)))  # used 3x each: compute once
     lo = gc - jnp.mod(gc - to_gamma(phi - w, b), 2.0 * jnp.pi)
     hi = gc + jnp.mod(to_gamma(phi + w, b) - gc, 2.0 * jnp.pi)
     # w = 0: the mods may return 2 pi - eps; collapse
     lo = jnp.where(w > 0, lo, gc)
     hi = jnp.where(w > 0, hi, gc)
-    return lo, hi
+    return materialize((lo, hi))
 
 
 def intersect_intervals(lo1, hi1, lo2, hi2):

@@ -93,7 +93,7 @@ from ..core.vec import as_directions, Vec3
 from ..microfacet import distribution as mf
 from ..optics.fresnel import fresnel_dielectric
 from .fiber import (RGB_WAVELENGTHS_NM, arc_element, ellipse_chord, ellipse_normal, ellipse_point, half_width,
-                    intersect_intervals, melanin_sigma_a_spectral, meso_frame, meso_normal, minor_axis,
+                    intersect_intervals, materialize, melanin_sigma_a_spectral, meso_frame, meso_normal, minor_axis,
                     to_gamma, to_phi, visible_gamma_interval, wrap_pi)  # to_gamma, to_phi: huang's public names
 from .huang_sampling import _TINY, _default_key, _ex, _finite, _pdf, _sample, _sample_path_jit
 
@@ -229,7 +229,7 @@ def _r_lobe(p: Params, wi: Vec3, wo: Vec3, fresnel=True, smith=True):
     tho, pho = fiber_angles(wo)
     lo1, hi1 = visible_gamma_interval(thi, phii, alpha, b)
     lo2, hi2 = visible_gamma_interval(tho, pho, alpha, b)
-    lo, hi = intersect_intervals(lo1, hi1, lo2, hi2)
+    lo, hi = materialize(intersect_intervals(lo1, hi1, lo2, hi2))
     h = V.normalize(wi + wo)
     F, _, _, _ = fresnel_dielectric(jnp.clip(V.dot(wi, h), 0.0, 1.0), eta)
     if not fresnel:
@@ -277,15 +277,15 @@ def _internal_terms(p: Params, wi: Vec3, wo: Vec3, g, us):
     n1 = Vec3(0.0 * ny, ny, nz)
     m1 = meso_normal(ny, nz, alpha)
     fr1 = meso_frame(m1)
-    il = fr1.to_local(wi)
+    il = materialize(fr1.to_local(wi))
     ok = il.z > 0      # macro visibility of w_i: the integration interval
     il = V.where(ok, il, z)
-    h1 = mf.sample_visible(kind, il, beta, beta, us[0], us[1])
+    h1 = materialize(mf.sample_visible(kind, il, beta, beta, us[0], us[1]))
     ci1 = V.dot(il, h1)
     tl, ok_t = refract(il, h1, eta)
     ok = ok & ok_t & (ci1 > 0) & (tl.z < 0)
     tl = V.where(ok, tl, -z)
-    d = fr1.to_world(tl)
+    d = materialize(fr1.to_world(tl))
     ok = ok & (V.dot(d, n1) < 0)
     F1, _, _, _ = fresnel_dielectric(jnp.abs(ci1), eta)
     w = il.z * (1.0 - F1) * mf.G1(kind, tl, h1, beta)          # |i.m1| T1 G1(t)
@@ -297,7 +297,7 @@ def _internal_terms(p: Params, wi: Vec3, wo: Vec3, g, us):
         # chord to interface k + 1, absorption (Huang Eq. 4.17), exit connection to w_o (Huang Eq. 4.21)
         s = ellipse_chord(qy, qz, d, b)
         qy, qz = qy + s * d.y, qz + s * d.z
-        my, mz = ellipse_normal(qy, qz, b)
+        my, mz = materialize(ellipse_normal(qy, qz, b))
         n_in = Vec3(0.0 * my, -my, -mz)
         m_in = -meso_normal(my, mz, alpha)
         A = A * jnp.exp(-sig * s[..., None])
@@ -306,16 +306,16 @@ def _internal_terms(p: Params, wi: Vec3, wo: Vec3, g, us):
             break
         # internal reflection at interface k + 1 (visible-normal sampling)
         fr = meso_frame(m_in)
-        wl = fr.to_local(-d)
+        wl = materialize(fr.to_local(-d))
         cwn = V.dot(-d, n_in)
         ok = ok & (wl.z > 0) & (cwn > _TINY)
         wl = V.where(ok, wl, z)
-        h = mf.sample_visible(kind, wl, beta, beta, us[2 * k], us[2 * k + 1])
+        h = materialize(mf.sample_visible(kind, wl, beta, beta, us[2 * k], us[2 * k + 1]))
         ci = V.dot(wl, h)
         rl = reflect(wl, h)
         ok = ok & (ci > 0) & (rl.z > 0)
         rl = V.where(ok, rl, z)
-        d = fr.to_world(rl)
+        d = materialize(fr.to_world(rl))
         ok = ok & (V.dot(d, n_in) > 0)
         F, _, _, _ = fresnel_dielectric(jnp.abs(ci), 1.0 / eta)
         area = wl.z / jnp.where(ok, cwn, 1.0)
@@ -335,6 +335,7 @@ def _internal(p: Params, wi: Vec3, wo: Vec3, key):
     t, w = simpson(n)
     # two uniforms per sampled microfacet; n_lobes = 3 keeps the historical stream (4 uniforms)
     us = uniforms(key, (n + 1, p.n_paths), 2 * (p.n_lobes - 1), dtype)
+    us = materialize(us)
     # shapes: directions (...) + (nodes, paths)
     g = lo[..., None, None] + t[:, None] * (hi - lo)[..., None, None]
     terms = _internal_terms(p, _ex(wi), _ex(wo), g, us)
