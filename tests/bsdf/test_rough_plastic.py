@@ -350,7 +350,7 @@ def test_gradients_match_finite_differences_mitsuba_scheme():
 def test_spatially_varying_parameters_broadcast(static):
     """alpha, eta with a leading axis (one coat per direction) = separate scalar evaluations
     (precomputed tables: a scalar set is looked up through its resampled table, a batch of sets
-    through the Chebyshev series, equal within the resampling error <= 5e-5 in T)."""
+    through the Chebyshev series, equal within the resampling error <= 5.4e-5 in T)."""
     alphas, etas = jnp.array([0.05, 0.3, 1.0]), jnp.array([1.2, 1.5, 2.5])
     wi = spherical_direction(jnp.array([0.1, 0.8, 1.3]), 0.0)
     wo = spherical_direction(jnp.array([0.5, 0.3, 1.0]), jnp.array([3.0, 1.0, 2.0]))

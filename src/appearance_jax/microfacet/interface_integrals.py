@@ -25,8 +25,10 @@ looks T up per direction:
 - ``"mitsuba"``: Mitsuba 3's discretisation (T linear in mu between 64 equispaced nodes,
   R_int an equal-weight mean over them, about 1% low).
 
-Used by ``bsdf.rough_plastic`` (the coat over a Lambertian base). The quadrature's design
-and the measured accuracy of both schemes: docs/microfacet.md.
+Used by ``bsdf.rough_plastic`` (the coat over a Lambertian base), by default through
+:mod:`appearance_jax.microfacet.coat_tables` (scheme ``"precomputed"``: the accurate scheme's
+tables computed once on an (alpha, eta) grid and interpolated). The quadrature's design and
+the measured accuracy of all schemes: docs/microfacet.md.
 """
 
 from __future__ import annotations
