@@ -33,9 +33,11 @@ direction. Spatially varying alpha / eta (leading axes) cost one set of tables p
   project's quadrature on a grid over (ln alpha, eta) and shipped with the package
   (:mod:`appearance_jax.microfacet.coat_tables`), interpolated by a cubic B-spline (C2 in
   alpha and eta). Measured error against ``"accurate"``: <= 8e-5 absolute for T(mu) and
-  R_int over the whole parameter range; derivatives w.r.t. alpha and eta within ~1e-3
-  relative away from the corner eta -> 1, alpha -> 1e-3 (docs/microfacet.md). Cost: a
-  4 x 4 spline lookup per parameter set.
+  R_int over the whole parameter range; their derivatives w.r.t. alpha and eta within
+  6e-3 absolute (of derivatives up to ~14) for eta >= 1.01 and alpha >= 0.01, less close in
+  the corner eta -> 1, alpha -> 1e-3 where T changes on the scale eta - 1 ~ alpha^2
+  (docs/microfacet.md). Cost: a 4 x 4 spline lookup per parameter set, then a linear
+  lookup in sqrt(mu) per direction.
 - ``"accurate"``: the quadrature inside the jitted function (~5e5 integrand evaluations
   per parameter set): T is a Chebyshev interpolant on 64 nodes in sqrt(mu), R_int a
   Gauss-Legendre integral over mu split at the critical cosine.
