@@ -251,8 +251,11 @@ def _r_lobe(p: Params, wi: Vec3, wo: Vec3, fresnel=True, smith=True):
     else:
         t, w = simpson(p.n_intervals)
         g = lo[..., None] + t * (hi - lo)[..., None]
-        ex = lambda v: Vec3(v.x[..., None], v.y[..., None], v.z[..., None])
-        f = _r_integrand(kind, beta, alpha, eta, b, ex(wi), ex(wo), g, smith)
+        # one flat axis (directions x nodes): faster to compile, see _internal
+        shape = jnp.broadcast_shapes(g.shape, *(jnp.shape(c) + (1,) for c in (*wi, *wo)))
+        flat = lambda v: jnp.broadcast_to(v, shape).reshape(-1)  # noqa: E731
+        fv = lambda v: Vec3(*(flat(c[..., None]) for c in (v.x, v.y, v.z)))  # noqa: E731
+        f = _r_integrand(kind, beta, alpha, eta, b, fv(wi), fv(wo), flat(g), smith).reshape(shape)
         integral = (hi - lo) * jnp.sum(w * f, axis=-1)
     return F * integral / (8.0 * cos_o * Do)
 
@@ -336,9 +339,14 @@ def _internal(p: Params, wi: Vec3, wo: Vec3, key):
     # two uniforms per sampled microfacet; n_lobes = 3 keeps the historical stream (4 uniforms)
     us = uniforms(key, (n + 1, p.n_paths), 2 * (p.n_lobes - 1), dtype)
     us = materialize(us)
-    # shapes: directions (...) + (nodes, paths)
+    # shapes: directions (...) + (nodes, paths), flattened to one axis for the per-path work:
+    # XLA:CPU compiles elementwise kernels over one flat axis ~30% faster than over broadcasts
     g = lo[..., None, None] + t[:, None] * (hi - lo)[..., None, None]
-    terms = _internal_terms(p, _ex(wi), _ex(wo), g, us)
+    shape = jnp.broadcast_shapes(g.shape, us[0].shape, *(jnp.shape(c) + (1, 1) for c in (*wi, *wo)))
+    flat = lambda v: jnp.broadcast_to(v, shape).reshape(-1)  # noqa: E731
+    fv = lambda v: Vec3(*(flat(c) for c in _ex(v)))  # noqa: E731
+    terms = _internal_terms(p, fv(wi), fv(wo), flat(g), tuple(flat(u) for u in us))
+    terms = [x.reshape(shape + x.shape[-1:]) for x in terms]
     scale = (hi - lo) / (2.0 * jnp.maximum(jnp.cos(tho), _TINY) * half_width(p.eccentricity, pho))
     return [simpson_mc(x, w[:, None], scale[..., None], p.n_paths) for x in terms]
 

@@ -87,7 +87,7 @@ from ..core.params import Bands, param, params_class, Real, static
 from ..core.special import safe_sqrt, smoothstep
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_amplitudes
-from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, wrap_pi
+from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, materialize, wrap_pi
 
 DEG = math.pi / 180.0
 N_BISECT = 60          # bisection steps per monotone piece (2^-60: float64 round-off)
@@ -228,7 +228,7 @@ def roots(p: int, phi, eta_p, n_iter: int = N_BISECT) -> Roots:
     step = (exit_phi(p, hb, eta_p) - target) / jnp.where(ok, slope, 1.0)
     h = jnp.clip(hb - jnp.where(ok, step, 0.0), -1.0, 1.0)
     hs, vs = list(h), list(valid)
-    return Roots(jnp.stack(hs), jnp.stack(vs))
+    return Roots(materialize(jnp.stack(hs)), jnp.stack(vs))
 
 
 def fresnel_fiber(h, eta, theta_d, mode: str = "bravais"):
@@ -284,7 +284,7 @@ def trt_caustic(eta, theta_d, sigma_a, caustic_width, caustic_fade, caustic_limi
     eta_p = bravais_eta(eta, theta_d)
     below = eta_p < 2.0
     hc = caustic_offset(eta_p)
-    phi_c = jnp.where(below, wrap_pi(exit_phi(2, hc, eta_p)), 0.0)
+    phi_c = materialize(jnp.where(below, wrap_pi(exit_phi(2, hc, eta_p)), 0.0))
     d2 = jnp.abs(_d2phi_dh2(2, hc, eta_p))
     dh_c = 2.0 * safe_sqrt(2.0 * caustic_width / jnp.maximum(d2, 1e-12))
     dh = jnp.where(below, jnp.minimum(caustic_limit, dh_c), caustic_limit)
@@ -337,8 +337,8 @@ def lobes(p: Params, theta_i, theta_o, phi, phi_h=0.0):
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3):
-    th_i, ph_i = fiber_angles(wi)
-    th_o, ph_o = fiber_angles(wo)
+    # the angles (atan2 polynomials) feed every lobe: computed once (fiber.materialize)
+    th_i, ph_i, th_o, ph_o = materialize((*fiber_angles(wi), *fiber_angles(wo)))
     return jnp.sum(lobes(p, th_i, th_o, ph_o - ph_i, 0.5 * (ph_i + ph_o)), axis=0)
 
 
