@@ -166,7 +166,8 @@ def _eval_with(p: Params, tab: CoatTables, wi: Vec3, wo: Vec3):
     active = _active(wi, wo)
     h = normalize(wi + wo)
     D = md.D(kind, h, alpha)
-    G = md.G2(kind, wi, wo, h, alpha, correlated=p.shadowing == "correlated")
+    # reflection only: no transmission branch (its Beta function would be computed and discarded)
+    G = md.G2(kind, wi, wo, h, alpha, correlated=p.shadowing == "correlated", reflection_only=True)
     F = fresnel_dielectric(jnp.clip(dot(wi, h), 0.0, 1.0), eta)[0]
     den = 4.0 * wi.z * wo.z
     ok = active & (den > 0)

@@ -1,0 +1,107 @@
+"""A compact Levenberg-Marquardt solver for the fitters: small to trace, small to compile.
+
+The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minimises
+1/2 |r(z)|^2 for a residual vector r of a handful of unconstrained parameters z, as one
+``lax.while_loop`` (jittable, vmappable over starts or tables):
+
+- Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter), computed again
+  only after an accepted step;
+- step: (JᵀJ + λ D) δ = -Jᵀr, solved by Cholesky, with Marquardt's scaling D = the largest
+  diag(JᵀJ) seen so far (Moré 1978, "The Levenberg-Marquardt algorithm: implementation and
+  theory", Lecture Notes in Math. 630), so the step is invariant to the parameters' scales;
+- gain ratio ρ = actual / predicted decrease of the loss; the step is accepted when ρ > 1e-4
+  and the new loss is finite. The damping follows Nielsen (1999, "Damping parameter in
+  Marquardt's method", IMM-REP-1999-05): on acceptance λ <- λ max(1/3, 1 - (2ρ - 1)^3) and ν
+  <- 2, on rejection λ <- λ ν and ν <- 2ν (a NaN or inf trial point is a rejection, so a model
+  that blows up far from the data only shortens the step);
+- convergence (the Cauchy criterion of optimistix' least-squares solvers): a step with
+  max_i |δ_i| / (atol + rtol |z_i|) <= 1 and |Δloss| <= atol + rtol loss (accepted or, at an
+  optimum, rejected by rounding), or a residual
+  orthogonal to every Jacobian column to rounding (cosine <= 100 eps, MINPACK's gtol test).
+  ``max_steps`` counts iterations (accepted or not); a damping above 1e16 (no step decreases
+  the loss) stops the loop unconverged.
+
+Why our own: optimistix' LevenbergMarquardt (still available as ``solver="optx_lm"``) reaches
+the same optima, but its trust-region machinery takes several times longer to trace and to
+compile; a fit's wall time is mostly compilation (benchmarks/README.md, "Compilation").
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+#: smallest gain ratio of an accepted step
+RHO_MIN = 1e-4
+#: initial damping, relative to the largest diagonal of JᵀJ
+LAMBDA0 = 1e-3
+#: the orthogonality test, in units of machine epsilon
+GTOL_EPS = 100.0
+#: damping beyond which no step can make progress (the loss is flat to rounding): stop
+LAMBDA_MAX = 1e16
+
+
+def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10, max_steps: int = 400,
+                        progress=None):
+    """Minimise 1/2 |fn(z, data)|^2 from ``z0`` (p,). Returns ``(z, loss, steps, converged)``
+    (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``progress``: a
+    host function ``(step, loss)`` called after every iteration (a host callback: such a
+    program is not kept in JAX's persistent compilation cache)."""
+    z0 = jnp.asarray(z0)
+    dt = z0.dtype
+    jac = jax.jacfwd(fn)
+
+    def lin(z):
+        return fn(z, data), jac(z, data)
+
+    r0, J0 = lin(z0)
+    loss0 = 0.5 * jnp.sum(r0 * r0)
+    H0 = J0.T @ J0
+    D0 = jnp.maximum(jnp.diag(H0), jnp.finfo(dt).tiny)
+    lam0 = jnp.asarray(LAMBDA0, dt)
+    eye = jnp.eye(z0.shape[0], dtype=dt)
+
+    def cond(s):
+        return (~s["done"]) & (s["step"] < max_steps)
+
+    def body(s):
+        z, r, J, loss, D, lam, nu = s["z"], s["r"], s["J"], s["loss"], s["D"], s["lam"], s["nu"]
+        g = J.T @ r
+        H = J.T @ J
+        D = jnp.maximum(D, jnp.diag(H))
+        A = H + lam * D * eye
+        c = jax.scipy.linalg.cho_factor(A, lower=True)
+        dz = -jax.scipy.linalg.cho_solve(c, g)
+        dz = jnp.where(jnp.all(jnp.isfinite(dz)), dz, 0.0)
+        z_new = z + dz
+        r_new = fn(z_new, data)
+        loss_new = 0.5 * jnp.sum(r_new * r_new)
+        pred = 0.5 * jnp.dot(dz, lam * D * dz - g)  # loss decrease of the linear model, >= 0
+        rho = (loss - loss_new) / jnp.where(pred > 0, pred, 1.0)
+        ok = jnp.isfinite(loss_new) & (pred > 0) & (rho > RHO_MIN)
+        # first-order optimality to rounding: the residual is orthogonal to every Jacobian column
+        # (the cosine, as MINPACK's gtol test); catches an optimum where rounding rejects every step
+        rnorm = jnp.sqrt(2.0 * loss)
+        flat = jnp.max(jnp.abs(g) / jnp.sqrt(D)) <= GTOL_EPS * jnp.finfo(dt).eps * rnorm
+        small_step = jnp.all(jnp.abs(dz) <= atol + rtol * jnp.abs(z))
+        small_change = jnp.abs(loss - loss_new) <= atol + rtol * loss
+        # a step below the tolerances whose loss matches to the tolerance ends the fit, accepted or
+        # not: at an optimum rounding rejects such steps (away from one a short enough step always
+        # decreases the loss, and a NaN trial point fails small_change)
+        converged = (jnp.isfinite(loss_new) & small_step & small_change) | flat
+        z2, r2, J2 = jax.lax.cond(ok, lambda: (z_new,) + lin(z_new), lambda: (z, r, J))
+        lam2 = jnp.where(ok, lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu)
+        nu2 = jnp.where(ok, 2.0, 2.0 * nu)
+        stuck = lam2 > LAMBDA_MAX
+        if progress is not None:
+            jax.debug.callback(progress, s["step"] + 1, jnp.where(ok, loss_new, loss))
+        return dict(z=z2, r=r2, J=J2, loss=jnp.where(ok, loss_new, loss), D=D, lam=lam2, nu=nu2,
+                    step=s["step"] + 1, done=converged | stuck, converged=converged)
+
+    s0 = dict(z=z0, r=r0, J=J0, loss=loss0, D=D0, lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0),
+              done=~jnp.isfinite(loss0), converged=jnp.asarray(False))
+    s = jax.lax.while_loop(cond, body, s0)
+    return s["z"], s["loss"], s["step"], s["converged"]
+
+
+__all__ = ["levenberg_marquardt"]
