@@ -204,8 +204,11 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
     S = jnp.broadcast_shapes(jnp.shape(wi.z), jnp.shape(wo.z))
     shape = S + (n_samples,)
     key_rot, key_walk = jax.random.split(key)
-    wi = wi.map(lambda a: jnp.broadcast_to(jnp.asarray(a)[..., None], shape))
-    wo = wo.map(lambda a: jnp.broadcast_to(jnp.asarray(a)[..., None], shape))
+    # the walk runs on one flat axis (directions x samples): XLA:CPU compiles elementwise
+    # kernels over a flat axis much faster than over broadcasts (same numbers, same order)
+    full_shape, shape = shape, (math.prod(shape),)
+    wi = wi.map(lambda a: jnp.broadcast_to(jnp.asarray(a)[..., None], full_shape).reshape(shape))
+    wo = wo.map(lambda a: jnp.broadcast_to(jnp.asarray(a)[..., None], full_shape).reshape(shape))
     if azimuth_average:
         psi = 2.0 * jnp.pi * jax.random.uniform(key_rot, shape, thickness.dtype)
         c, s = jnp.cos(psi), jnp.sin(psi)
@@ -329,6 +332,7 @@ def _run(media, thickness, wi, wo, key, eta, bottom, n_samples, max_bounces, ord
         x = jnp.where(with_bands(ok), acc / with_bands(mu_o), 0.0)
     else:
         x = jnp.where(with_bands(ok), acc, 0.0)
+    x, beta, ok = x.reshape(full_shape + (B,)), beta.reshape(full_shape + (B,)), ok.reshape(full_shape)
     f = jnp.mean(x, axis=-2)
     se = jnp.std(x, axis=-2, ddof=1) / math.sqrt(n_samples) if n_samples > 1 else jnp.zeros_like(f)
     remaining = jnp.mean(jnp.where(with_bands(ok), beta, 0.0), axis=-2)
