@@ -116,6 +116,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...bcsdf import thread
+from ...bcsdf.fiber import materialize
 from ...core import warp
 from ...core.model import Model, boundary, with_bands
 from ...core.params import Bands, integer, param, params_class, Real, static
@@ -206,8 +207,8 @@ def _components(w: Vec3, alpha, cb, sb):
     x, y, z = (jnp.asarray(c)[..., None, None] for c in w)
     wu = x * cb + y * sb
     wv = -x * sb + y * cb
-    ca, sa = jnp.cos(alpha), jnp.sin(alpha)
-    return ca * wu + sa * z, -sa * wu + ca * z, wv
+    ca, sa = materialize((jnp.cos(alpha), jnp.sin(alpha)))  # (J, T) curve: not recomputed per consumer
+    return materialize((ca * wu + sa * z, -sa * wu + ca * z, wv))
 
 
 def _fam(x):
