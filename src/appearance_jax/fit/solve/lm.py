@@ -6,9 +6,9 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
 
 - Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter), computed again
   only after an accepted step;
-- step: (JᵀJ + λ D) δ = -Jᵀr, solved by Cholesky, with Marquardt's scaling D = the largest
-  diag(JᵀJ) seen so far (Moré 1978, "The Levenberg-Marquardt algorithm: implementation and
-  theory", Lecture Notes in Math. 630), so the step is invariant to the parameters' scales;
+- step: (JᵀJ + λ d I) δ = -Jᵀr, solved by Cholesky, with d the mean of diag(JᵀJ) (isotropic
+  damping, as Levenberg's; Marquardt's per-parameter scaling, Moré 1978, crawled for hundreds of
+  steps when a parameter sat at a bound of its transform, where its Jacobian column vanishes);
 - gain ratio ρ = actual / predicted decrease of the loss; the step is accepted when ρ > 1e-4
   and the new loss is finite. The damping follows Nielsen (1999, "Damping parameter in
   Marquardt's method", IMM-REP-1999-05): on acceptance λ <- λ max(1/3, 1 - (2ρ - 1)^3) and ν
@@ -57,7 +57,7 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     r0, J0 = lin(z0)
     loss0 = 0.5 * jnp.sum(r0 * r0)
     H0 = J0.T @ J0
-    D0 = jnp.maximum(jnp.diag(H0), jnp.finfo(dt).tiny)
+    D0 = jnp.zeros_like(z0) + jnp.mean(jnp.diag(H0))
     lam0 = jnp.asarray(LAMBDA0, dt)
     eye = jnp.eye(z0.shape[0], dtype=dt)
 
@@ -68,7 +68,10 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         z, r, J, loss, D, lam, nu = s["z"], s["r"], s["J"], s["loss"], s["D"], s["lam"], s["nu"]
         g = J.T @ r
         H = J.T @ J
-        D = jnp.maximum(D, jnp.diag(H))
+        # isotropic damping lam * mean(diag H) * I: a parameter pinned at a bound (its Jacobian column
+        # vanishes there) stays damped, while the others converge (Marquardt's diagonal scaling
+        # crawled for hundreds of steps on such fits)
+        D = jnp.zeros_like(D) + jnp.mean(jnp.diag(H))
         A = H + lam * D * eye
         c = jax.scipy.linalg.cho_factor(A, lower=True)
         dz = -jax.scipy.linalg.cho_solve(c, g)
@@ -82,7 +85,8 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         # first-order optimality to rounding: the residual is orthogonal to every Jacobian column
         # (the cosine, as MINPACK's gtol test); catches an optimum where rounding rejects every step
         rnorm = jnp.sqrt(2.0 * loss)
-        flat = jnp.max(jnp.abs(g) / jnp.sqrt(D)) <= GTOL_EPS * jnp.finfo(dt).eps * rnorm
+        colnorm = jnp.sqrt(jnp.maximum(jnp.diag(H), jnp.finfo(dt).tiny))
+        flat = jnp.max(jnp.abs(g) / colnorm) <= GTOL_EPS * jnp.finfo(dt).eps * rnorm
         small_step = jnp.all(jnp.abs(dz) <= atol + rtol * jnp.abs(z))
         small_change = jnp.abs(loss - loss_new) <= atol + rtol * loss
         # a step below the tolerances whose loss matches to the tolerance ends the fit, accepted or
