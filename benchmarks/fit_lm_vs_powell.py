@@ -146,7 +146,7 @@ def main():
         labels, lm, pw = run(name)
         print(f"\n{name}: free parameters {', '.join(labels)}")
         print(f"  {'solver':<22} {'iterations':>10} {'loss evals':>10} {'time [s]':>9} {'compile [s]':>11} {'final loss':>14}")
-        for label, r in (("optimistix LM", lm), ("SciPy Powell", pw)):
+        for label, r in (("LM (fit, default)", lm), ("SciPy Powell", pw)):
             print(f"  {label:<22} {r['iterations']:>10} {str(r['evals']):>10} {r['time']:>9.3f} {r['compile']:>11.2f}"
                   f" {r['loss']:>14.8g}")
         print(f"  ratio Powell/LM time: {pw['time'] / lm['time']:.1f}x (solve only), "

@@ -26,6 +26,8 @@ if "APPEARANCE_JAX_COMPILE_CACHE" not in os.environ:
 from appearance_jax.core import compile_cache  # noqa: E402
 
 compile_cache.ensure()
+# only programs that take a while: the suite compiles thousands of small ones, rarely twice
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
 
 
 def pytest_unconfigure(config):
