@@ -22,8 +22,9 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
   the loss) stops the loop unconverged.
 
 Why our own: optimistix' LevenbergMarquardt (still available as ``solver="optx_lm"``) reaches
-the same optima, but its trust-region machinery takes several times longer to trace and to
-compile; a fit's wall time is mostly compilation (benchmarks/README.md, "Compilation").
+the same optima, but its trust-region machinery takes 3-4x longer to trace (compilation takes
+about as long); a warm fit's wall time is mostly tracing (benchmarks/README.md,
+``fit_lm_vs_powell.py`` and ``solver_compile.py``).
 """
 
 from __future__ import annotations
@@ -33,7 +34,7 @@ import jax.numpy as jnp
 
 #: smallest gain ratio of an accepted step
 RHO_MIN = 1e-4
-#: initial damping, relative to the largest diagonal of JᵀJ
+#: initial damping, relative to the mean diagonal of JᵀJ
 LAMBDA0 = 1e-3
 #: the orthogonality test, in units of machine epsilon
 GTOL_EPS = 100.0
@@ -56,8 +57,6 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
 
     r0, J0 = lin(z0)
     loss0 = 0.5 * jnp.sum(r0 * r0)
-    H0 = J0.T @ J0
-    D0 = jnp.zeros_like(z0) + jnp.mean(jnp.diag(H0))
     lam0 = jnp.asarray(LAMBDA0, dt)
     eye = jnp.eye(z0.shape[0], dtype=dt)
 
@@ -65,21 +64,21 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         return (~s["done"]) & (s["step"] < max_steps)
 
     def body(s):
-        z, r, J, loss, D, lam, nu = s["z"], s["r"], s["J"], s["loss"], s["D"], s["lam"], s["nu"]
+        z, r, J, loss, lam, nu = s["z"], s["r"], s["J"], s["loss"], s["lam"], s["nu"]
         g = J.T @ r
         H = J.T @ J
         # isotropic damping lam * mean(diag H) * I: a parameter pinned at a bound (its Jacobian column
         # vanishes there) stays damped, while the others converge (Marquardt's diagonal scaling
         # crawled for hundreds of steps on such fits)
-        D = jnp.zeros_like(D) + jnp.mean(jnp.diag(H))
-        A = H + lam * D * eye
+        d = jnp.mean(jnp.diag(H))
+        A = H + (lam * d) * eye
         c = jax.scipy.linalg.cho_factor(A, lower=True)
         dz = -jax.scipy.linalg.cho_solve(c, g)
         dz = jnp.where(jnp.all(jnp.isfinite(dz)), dz, 0.0)
         z_new = z + dz
         r_new = fn(z_new, data)
         loss_new = 0.5 * jnp.sum(r_new * r_new)
-        pred = 0.5 * jnp.dot(dz, lam * D * dz - g)  # loss decrease of the linear model, >= 0
+        pred = 0.5 * jnp.dot(dz, (lam * d) * dz - g)  # loss decrease of the linear model, >= 0
         rho = (loss - loss_new) / jnp.where(pred > 0, pred, 1.0)
         ok = jnp.isfinite(loss_new) & (pred > 0) & (rho > RHO_MIN)
         # first-order optimality to rounding: the residual is orthogonal to every Jacobian column
@@ -99,10 +98,10 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         stuck = lam2 > LAMBDA_MAX
         if progress is not None:
             jax.debug.callback(progress, s["step"] + 1, jnp.where(ok, loss_new, loss))
-        return dict(z=z2, r=r2, J=J2, loss=jnp.where(ok, loss_new, loss), D=D, lam=lam2, nu=nu2,
+        return dict(z=z2, r=r2, J=J2, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
                     step=s["step"] + 1, done=converged | stuck, converged=converged)
 
-    s0 = dict(z=z0, r=r0, J=J0, loss=loss0, D=D0, lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0),
+    s0 = dict(z=z0, r=r0, J=J0, loss=loss0, lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0),
               done=~jnp.isfinite(loss0), converged=jnp.asarray(False))
     s = jax.lax.while_loop(cond, body, s0)
     return s["z"], s["loss"], s["step"], s["converged"]

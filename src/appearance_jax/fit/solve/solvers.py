@@ -4,7 +4,7 @@
     print(result.summary())
 
 Solvers (``solver=``): ``"lm"`` Levenberg-Marquardt (default; :mod:`~.lm`, a compact
-implementation that traces and compiles several times faster than optimistix'), ``"optx_lm"``
+implementation that traces 3-4x faster than optimistix'), ``"optx_lm"``
 optimistix' LevenbergMarquardt, ``"gn"`` Gauss-Newton, ``"dogleg"``, ``"bfgs"`` (optimistix BFGS
 on the scalar loss 1/2 sum r^2) and ``"jaxopt_lm"`` (jaxopt's LevenbergMarquardt). Every solver
 works in the unconstrained space of :mod:`~appearance_jax.fit.solve.transforms`; the whole solve
