@@ -210,6 +210,18 @@ def scales(space, x) -> np.ndarray:
     return np.where(np.isfinite(width), np.clip(a, 0.01 * width, width), a)
 
 
+def _scaled_eigh(space, x, cov):
+    """Eigenvalues (..., p), eigenvectors (..., p, p) of the covariance in scaled parameters
+    (:func:`scales`; numpy, leading batch axes allowed) and whether it is finite (...); a
+    non-finite one is decomposed as 0."""
+    R = scales(space, x)
+    cu = np.asarray(cov, np.float64) / (R[..., :, None] * R[..., None, :])
+    finite = np.all(np.isfinite(cu), axis=(-2, -1))
+    cu = np.where(finite[..., None, None], cu, 0.0)
+    w, v = np.linalg.eigh(0.5 * (cu + np.swapaxes(cu, -1, -2)))
+    return w, v, finite
+
+
 def unresolved(space, x, covs) -> tuple[np.ndarray, np.ndarray]:
     """(sigma along each unresolved eigen-direction, their eigenvectors) in scaled parameters.
 
@@ -217,19 +229,17 @@ def unresolved(space, x, covs) -> tuple[np.ndarray, np.ndarray]:
     of sigmas in units of the parameters' :func:`scales` (largest first) and (p, k) unit
     eigenvectors, for the directions whose sigma exceeds ``FLAT_FRACTION``.
     """
-    R = scales(space, x)
     sig, vecs = [], []
     for cov in covs:
-        cu = np.asarray(cov, np.float64) / np.outer(R, R)
-        if not np.all(np.isfinite(cu)):
+        w, v, finite = _scaled_eigh(space, x, cov)
+        if not finite:
             continue
-        w, v = np.linalg.eigh(0.5 * (cu + cu.T))
         for j in np.argsort(w)[::-1]:
             if w[j] <= FLAT_FRACTION ** 2:
                 break
             sig.append(math.sqrt(w[j]))
             vecs.append(v[:, j])
-    return np.array(sig), (np.stack(vecs, axis=1) if vecs else np.zeros((len(R), 0)))
+    return np.array(sig), (np.stack(vecs, axis=1) if vecs else np.zeros((np.shape(x)[-1], 0)))
 
 
 def flat_members(space, x, covs) -> np.ndarray:
@@ -240,13 +250,9 @@ def flat_members(space, x, covs) -> np.ndarray:
     scaled covariance is not finite contributes no direction, as in :func:`unresolved`.
     """
     x = np.asarray(x, np.float64)
-    R = scales(space, x)
     out = np.zeros(x.shape, bool)
     for cov in covs:
-        cu = np.asarray(cov, np.float64) / (R[..., :, None] * R[..., None, :])
-        finite = np.all(np.isfinite(cu), axis=(-2, -1))
-        cu = np.where(finite[..., None, None], cu, 0.0)
-        w, v = np.linalg.eigh(0.5 * (cu + np.swapaxes(cu, -1, -2)))
+        w, v, finite = _scaled_eigh(space, x, cov)
         big = (w > FLAT_FRACTION ** 2) & finite[..., None]  # (..., k): direction k is unresolved
         out |= np.any((np.abs(v) > MEMBER) & big[..., None, :], axis=-1)
     return out
