@@ -19,10 +19,10 @@ desired colour.
 
 from __future__ import annotations
 
-import jax
 import jax.numpy as jnp
 
 from ..core.frame import Frame
+from ..core.fusion import materialize
 from ..core.special import safe_acos, safe_asin, safe_sqrt
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric
@@ -33,25 +33,6 @@ EUMELANIN_RGB = (0.419, 0.697, 1.37)
 PHEOMELANIN_RGB = (0.187, 0.4, 1.05)
 # wavelengths (nm) of the RGB channels in the spectral form (Huang 2022's code)
 RGB_WAVELENGTHS_NM = (612.0, 549.0, 465.0)
-
-
-def materialize(tree):
-    """The arrays of ``tree`` unchanged (bit for bit), computed once and stored.
-
-    XLA:CPU fuses a chain of cheap elementwise ops (+, *, select, compare) into *every*
-    consumer, so a value used by several fusions is recomputed, and compiled, once per
-    consumer: in the hair kernels, with Vec3 components and per-direction values broadcast
-    over (nodes, paths), this duplicated the generated code 4-7x and made the compile slow.
-    It never duplicates a divide, so dividing by a 1 that the compiler cannot fold (it comes
-    out of an optimisation barrier) ends the chain: one store, one fused kernel. x / 1 = x
-    exactly; integer and boolean leaves are passed through."""
-    one = jax.lax.optimization_barrier(jnp.ones((), jnp.result_type(float)))
-
-    def one_div(v):
-        v = jnp.asarray(v)
-        return (v / one.astype(v.dtype)) if jnp.issubdtype(v.dtype, jnp.inexact) else v
-
-    return jax.tree.map(one_div, tree)
 
 
 def wrap_pi(x):

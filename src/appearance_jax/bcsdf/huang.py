@@ -85,6 +85,7 @@ import jax.numpy as jnp
 
 from ..core import vec as V
 from ..core.frame import fiber_angles, reflect, refract
+from ..core.fusion import materialize
 from ..core.model import Model, as_bands, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
 from ..core.quadrature import simpson, simpson_mc
@@ -93,7 +94,7 @@ from ..core.vec import as_directions, Vec3
 from ..microfacet import distribution as mf
 from ..optics.fresnel import fresnel_dielectric
 from .fiber import (RGB_WAVELENGTHS_NM, arc_element, ellipse_chord, ellipse_normal, ellipse_point, half_width,
-                    intersect_intervals, materialize, melanin_sigma_a_spectral, meso_frame, meso_normal, minor_axis,
+                    intersect_intervals, melanin_sigma_a_spectral, meso_frame, meso_normal, minor_axis,
                     to_gamma, to_phi, visible_gamma_interval, wrap_pi)  # to_gamma, to_phi: huang's public names
 from .huang_sampling import _TINY, _default_key, _ex, _finite, _pdf, _sample, _sample_path_jit
 

@@ -82,12 +82,13 @@ import jax
 import jax.numpy as jnp
 
 from ..core.frame import fiber_angles
+from ..core.fusion import materialize
 from ..core.model import Model, as_bands, boundary
 from ..core.params import Bands, param, params_class, Real, static
 from ..core.special import safe_sqrt, smoothstep
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_amplitudes
-from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, materialize, wrap_pi
+from .fiber import bravais_eta, bravais_eta_parallel, exit_azimuth, wrap_pi
 
 DEG = math.pi / 180.0
 N_BISECT = 60          # bisection steps per monotone piece (2^-60: float64 round-off)
@@ -337,7 +338,7 @@ def lobes(p: Params, theta_i, theta_o, phi, phi_h=0.0):
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3):
-    # the angles (atan2 polynomials) feed every lobe: computed once (fiber.materialize)
+    # the angles (atan2 polynomials) feed every lobe: computed once (core.fusion.materialize)
     th_i, ph_i, th_o, ph_o = materialize((*fiber_angles(wi), *fiber_angles(wo)))
     return jnp.sum(lobes(p, th_i, th_o, ph_o - ph_i, 0.5 * (ph_i + ph_o)), axis=0)
 

@@ -116,8 +116,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ...bcsdf import thread
-from ...bcsdf.fiber import materialize
 from ...core import warp
+from ...core.fusion import materialize
 from ...core.model import Model, boundary, with_bands
 from ...core.params import Bands, integer, param, params_class, Real, static
 from ...core.rng import uniforms
