@@ -52,6 +52,39 @@ def best_time(fn, repeats):
     return min(ts)
 
 
+def best_times(runs, repeats):
+    """Best wall time of each of ``runs`` (name -> callable) after a warm-up call each, the
+    calls alternating so that a change in machine load affects them alike."""
+    for fn in runs.values():
+        fn()
+    best = {k: float("inf") for k in runs}
+    for _ in range(repeats):
+        for k, fn in runs.items():
+            t0 = time.perf_counter()
+            fn()
+            best[k] = min(best[k], time.perf_counter() - t0)
+    return best
+
+
+def mitsuba_eval_fn(dr, mi, bsdf, wi_np, wo_np, mode=None):
+    """``run()`` evaluating Mitsuba's ``bsdf`` at the pairs (wi, wo: (3, n) numpy, local frame)
+    and returning f, i.e. Mitsuba's eval divided by |cos theta_o| (it returns f |cos theta_o|).
+    ``mode``: a ``mi.TransportMode`` for the context (default: Mitsuba's, Radiance)."""
+    si = dr.zeros(mi.SurfaceInteraction3f, wi_np.shape[1])
+    si.wi = mi.Vector3f(wi_np)
+    wo = mi.Vector3f(wo_np)
+    ctx = mi.BSDFContext() if mode is None else mi.BSDFContext(mode)
+    cos_o = mi.Float(np.abs(wo_np[2]))
+
+    def run():
+        v = bsdf.eval(ctx, si, wo) / cos_o
+        dr.eval(v)
+        dr.sync_thread()
+        return v
+
+    return run
+
+
 def sharded_vec3(rows, n_devices=1):
     """A Vec3 of the three rows of ``rows`` (3, n), split over the first ``n_devices`` JAX
     devices along the batch axis (jax.sharding)."""

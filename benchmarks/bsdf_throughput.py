@@ -27,27 +27,12 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 
-from _common import best_time, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_time, best_times, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
 ALPHA = 0.3
-
-
-def best_times(runs, repeats):
-    """Best wall time of each of ``runs`` (name -> callable) after a warm-up call each, the
-    calls alternating so that a change in machine load affects them alike."""
-    times = {k: [] for k in runs}
-    for fn in runs.values():
-        fn()
-    for _ in range(repeats):
-        for k, fn in runs.items():
-            t0 = time.perf_counter()
-            fn()
-            times[k].append(time.perf_counter() - t0)
-    return {k: min(v) for k, v in times.items()}
 
 
 def _temp_mb(f, *args):

@@ -25,7 +25,7 @@ import sys
 import time
 
 import numpy as np
-from _common import mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_times, mitsuba_eval_fn, mitsuba_llvm, sharded_vec3, throughput_args
 
 ALPHA, INT_IOR, EXT_IOR = 0.3, 1.5, 1.0
 
@@ -84,33 +84,9 @@ def mitsuba_eval(wi_np, wo_np):
         return None, None, f"{mi}"
     bsdf = mi.load_dict({"type": "roughdielectric", "distribution": "ggx", "alpha": ALPHA,
                          "int_ior": INT_IOR, "ext_ior": EXT_IOR, "sample_visible": True})
-    si = dr.zeros(mi.SurfaceInteraction3f, wi_np.shape[1])
-    si.wi = mi.Vector3f(wi_np)
-    wo = mi.Vector3f(wo_np)
-    ctx = mi.BSDFContext(mi.TransportMode.Importance)
-    cos_o = mi.Float(np.abs(wo_np[2]))
-
-    def run():
-        v = bsdf.eval(ctx, si, wo) / cos_o  # Mitsuba returns f |cos theta_o|
-        dr.eval(v)
-        dr.sync_thread()
-        return v
-
+    run = mitsuba_eval_fn(dr, mi, bsdf, wi_np, wo_np, mi.TransportMode.Importance)
     values = np.asarray(run()[0])
     return run, values, f"mitsuba {mi.__version__} llvm_ad_rgb roughdielectric"
-
-
-def interleaved_best(calls, repeats):
-    """Best wall time per callable, timing them in turn (one call each per round) after a warm-up."""
-    for fn in calls.values():
-        fn()
-    best = {k: float("inf") for k in calls}
-    for _ in range(repeats):
-        for k, fn in calls.items():
-            t0 = time.perf_counter()
-            fn()
-            best[k] = min(best[k], time.perf_counter() - t0)
-    return best
 
 
 def sanity_check(wi_np, wo_np, mitsuba_values, m=4096):
@@ -141,7 +117,7 @@ def main():
     run_m, values_m, mv = mitsuba_eval(wi, wo)
     if run_m is not None:
         calls[mv] = run_m
-    best = interleaved_best(calls, args.repeats)
+    best = best_times(calls, args.repeats)
     print(f"{'implementation':64s} {'eval [M/s]':>11s} {'compile [s]':>12s}")
     for name, t in best.items():
         cs = f"{compile_s[name]:12.2f}" if name in compile_s else f"{'-':>12s}"

@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 import time
 
-from _common import mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_times, mitsuba_eval_fn, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ALPHA = 0.3
 ETA = 1.5
@@ -56,36 +56,13 @@ def mitsuba_runner(wi_np, wo_np):
     dr, mi = mitsuba_llvm()
     if dr is None:
         return None, f"{mi}"
-    n = wi_np.shape[1]
     bsdf = mi.load_dict({"type": "roughplastic", "distribution": "ggx", "alpha": ALPHA, "int_ior": ETA,
                          "ext_ior": 1.0, "nonlinear": False, "sample_visible": True,
                          "diffuse_reflectance": {"type": "rgb", "value": list(RHO)},
                          "specular_reflectance": 1.0})
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(wi_np)
-    wo = mi.Vector3f(wo_np)
-    ctx = mi.BSDFContext()
-    cos_o = mi.Float(wo_np[2])
-
-    def run():
-        # Mitsuba returns f * cos(theta_o); divide to return the same quantity as ours.
-        v = bsdf.eval(ctx, si, wo) / cos_o
-        dr.eval(v)
-        dr.sync_thread()
-
+    run = mitsuba_eval_fn(dr, mi, bsdf, wi_np, wo_np)
     run()  # compile its kernel
     return run, f"mitsuba {mi.__version__} llvm_ad_rgb ({os.environ.get('DRJIT_LIBLLVM_PATH')})"
-
-
-def alternate(runners, repeats):
-    """Best time of each runner over ``repeats`` rounds, calling them in turn each round."""
-    best = {k: float("inf") for k in runners}
-    for _ in range(repeats):
-        for k, fn in runners.items():
-            t0 = time.perf_counter()
-            fn()
-            best[k] = min(best[k], time.perf_counter() - t0)
-    return best
 
 
 def main():
@@ -97,7 +74,7 @@ def main():
         runners = {k: fn for k, (_, fn) in ours.items()}
         if mi_run is not None:
             runners["mitsuba"] = mi_run
-        best = alternate(runners, args.repeats)
+        best = best_times(runners, args.repeats)
         print(f"\nappearance-jax {nd} device(s) (jax {jv}) vs {mv}")
         print(f"{'implementation':52s} {'eval [M/s]':>11s} {'compile [s]':>12s} {'ratio ours/mitsuba':>19s}")
         for k, t in best.items():
