@@ -32,6 +32,7 @@ Under ``jit``, :func:`~appearance_jax.core.params.checked` /
 
 from __future__ import annotations
 
+import collections.abc
 import functools
 import inspect
 from dataclasses import dataclass, field
@@ -90,6 +91,39 @@ def estimate_of(out):
     """The value of a model evaluation: ``out`` itself, or the estimate of a stochastic model's
     ``(estimate, standard_error)`` pair (:attr:`Model.stochastic`)."""
     return out[0] if isinstance(out, tuple) else out
+
+
+class LazyPresets(collections.abc.Mapping):
+    """Named presets built on first access (then kept): ``LazyPresets(names, build)``.
+
+    For models whose presets cost XLA work to build (arrays stacked and padded per preset):
+    importing the registry, which every command does, must not pay for presets nobody asked
+    for. Iteration, ``len`` and ``in`` need only the names.
+    """
+
+    def __init__(self, names, build: Callable[[str], Any]):
+        self._names = tuple(names)
+        self._build = build
+        self._built: dict[str, Any] = {}
+
+    def __getitem__(self, name):
+        if name not in self._names:
+            raise KeyError(name)
+        if name not in self._built:
+            self._built[name] = self._build(name)
+        return self._built[name]
+
+    def __contains__(self, name):  # Mapping's would build the preset
+        return name in self._names
+
+    def __iter__(self):
+        return iter(self._names)
+
+    def __len__(self):
+        return len(self._names)
+
+    def __repr__(self):
+        return f"LazyPresets({list(self._names)!r})"
 
 
 @dataclass(frozen=True)

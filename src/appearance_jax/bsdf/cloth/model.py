@@ -118,7 +118,7 @@ import numpy as np
 from ...bcsdf import thread
 from ...core import warp
 from ...core.fusion import materialize
-from ...core.model import Model, boundary, with_bands
+from ...core.model import LazyPresets, Model, boundary, with_bands
 from ...core.params import Bands, integer, param, params_class, Real, static
 from ...core.rng import uniforms
 from ...core.special import erfinv, safe_asin, safe_div, safe_sqrt, smoothstep
@@ -460,7 +460,8 @@ def velvet(gamma_s: float = 6.0, **kw) -> Params:
     return preset("velvet", velvet_gamma_s=gamma_s, **kw)
 
 
-PRESETS = {name: preset(name) for name in presets.TABLE}
+# built on first use: stacking the curves of six fabrics is work no `import` should pay for
+PRESETS = LazyPresets(presets.TABLE, preset)
 
 MODEL = Model(
     name="cloth",

@@ -27,8 +27,8 @@ phi_d = phi_i - phi_r wrapped to [-pi, pi]. **Reweighting** (Sadeghi Eqs. 5.18-5
 P(t, w) = max(cos psi, 0), psi = atan2(w.t, w.n) the angle between n and w projected onto the
 (t, n) plane (projected length of the tangent sample). Both are symmetric in (w_i, w_r).
 
-**Weave builders** (continuous arguments in degrees / relative lengths; jnp arrays, so a
-fitter may differentiate through them): :func:`plain` (a ramp: Linen), :func:`crossing` (two flat
+**Weave builders** (continuous arguments in degrees / relative lengths; numpy arrays for
+concrete arguments, jnp arrays when an argument is traced, so a fitter may differentiate through them): :func:`plain` (a ramp: Linen), :func:`crossing` (two flat
 sections joined by a ramp: Silk crepe flat threads, Silk Shot), :func:`satin` (flat sections at
 -alpha, 0, +alpha with an optional knee: Polyester front flat threads), :func:`join` (disjoint
 sub-curves: Polyester back) and :func:`twill`.
@@ -49,7 +49,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ...core.special import safe_atan2, safe_sqrt
 
@@ -63,8 +65,15 @@ class Curve(NamedTuple):
     lengths: object
 
 
+def _xp(*xs):
+    """numpy for concrete values, jax.numpy when any value is traced (a fitter differentiating
+    through a builder): building presets and weaves eagerly then compiles no XLA programs."""
+    return jnp if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs)) else np
+
+
 def _arr(*xs):
-    return jnp.stack([jnp.asarray(x, dtype=jnp.result_type(float)) for x in xs])
+    xp = _xp(*xs)
+    return xp.stack([xp.asarray(x, dtype=jnp.result_type(float)) for x in xs])
 
 
 def plain(alpha=25.0, length=1.0) -> Curve:
@@ -103,25 +112,27 @@ def twill_coverage(over=2, under=1):
 
 def join(*curves: Curve) -> Curve:
     """Disjoint sub-curves joined by zero-length segments (jumps)."""
-    offs = jnp.concatenate([jnp.asarray(c.offsets) for c in curves])
+    xp = _xp(curves)
+    offs = xp.concatenate([xp.asarray(c.offsets) for c in curves])
     parts = []
     for k, c in enumerate(curves):
         if k:
-            parts.append(jnp.zeros((1,)))
-        parts.append(jnp.asarray(c.lengths, dtype=offs.dtype))
-    return Curve(offs, jnp.concatenate(parts))
+            parts.append(xp.zeros((1,), offs.dtype))
+        parts.append(xp.asarray(c.lengths, dtype=offs.dtype))
+    return Curve(offs, xp.concatenate(parts))
 
 
 def pad(curve: Curve, k: int) -> Curve:
     """Pad a curve to ``k`` control points: repeat the last offset with zero-length segments."""
-    o, ln = jnp.asarray(curve.offsets), jnp.asarray(curve.lengths)
+    xp = _xp(curve)
+    o, ln = xp.asarray(curve.offsets), xp.asarray(curve.lengths)
     n = o.shape[-1]
     if n > k:
         raise ValueError(f"tangent curve has {n} control points, more than {k}")
     if ln.shape[-1] != n - 1:
         raise ValueError(f"tangent curve: {n} offsets need {n - 1} segment lengths, got {ln.shape[-1]}")
-    o = jnp.concatenate([o, jnp.broadcast_to(o[..., -1:], o.shape[:-1] + (k - n,))], axis=-1)
-    ln = jnp.concatenate([ln, jnp.zeros(ln.shape[:-1] + (k - n,), ln.dtype)], axis=-1)
+    o = xp.concatenate([o, xp.broadcast_to(o[..., -1:], o.shape[:-1] + (k - n,))], axis=-1)
+    ln = xp.concatenate([ln, xp.zeros(ln.shape[:-1] + (k - n,), ln.dtype)], axis=-1)
     return Curve(o, ln)
 
 
@@ -129,7 +140,8 @@ def stack(curves) -> Curve:
     """Families' curves -> offsets (J, K), lengths (J, K - 1), padded to the largest K."""
     k = max(int(jnp.shape(c.offsets)[-1]) for c in curves)
     padded = [pad(c, k) for c in curves]
-    return Curve(jnp.stack([c.offsets for c in padded], axis=-2), jnp.stack([c.lengths for c in padded], axis=-2))
+    xp = _xp(padded)
+    return Curve(xp.stack([c.offsets for c in padded], axis=-2), xp.stack([c.lengths for c in padded], axis=-2))
 
 
 def sample_curve(offsets, lengths, n: int):
