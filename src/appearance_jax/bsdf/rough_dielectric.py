@@ -82,7 +82,7 @@ from ..core.rng import uniforms
 from ..core.vec import Vec3, dot, normalize
 from ..microfacet import cook_torrance as ct
 from ..microfacet import distribution as md
-from ..optics.fresnel import fresnel_dielectric
+from ..optics.fresnel import fresnel_dielectric, fresnel_dielectric_terms
 
 
 @params_class
@@ -111,8 +111,9 @@ def _geometry(p: Params, wi: Vec3, wo: Vec3):
     transmit = wi.z * wo.z < 0
     eta_i = jnp.where(wi.z < 0, eta, 1.0)
     eta_o = jnp.where(wo.z < 0, eta, 1.0)
-    # reflection: wi + wo; transmission: -(eta_i wi + eta_o wo) (the sign is fixed below)
-    scale = jnp.where(transmit, eta_o / eta_i, 1.0)
+    # reflection: wi + wo; transmission: -(eta_i wi + eta_o wo) (the sign is fixed below);
+    # eta_o / eta_i selected from eta and 1/eta (scalars): no division per element
+    scale = jnp.where(transmit, jnp.where(wo.z < 0, eta, 1.0 / eta), 1.0)
     h = normalize(wi + wo * scale)
     h = h * jnp.where(h.z < 0, -1.0, 1.0)
     valid = (wi.z != 0) & (wo.z != 0) & (h.z > 0)
@@ -120,22 +121,28 @@ def _geometry(p: Params, wi: Vec3, wo: Vec3):
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3):
+    # f_r and f_t (module docstring) as one quotient num / den: F, 1 - F, D and G2 / |zi zo| are
+    # each a fraction (fresnel_dielectric_terms, md.D_terms, md.G2_terms) whose denominators are
+    # multiplied into one division per element (issue 20: 19 divisions before, and XLA:CPU
+    # stores a quotient read by several operations, which split the kernel in 10)
     ax, ay = ct.alphas(p)
     kind = p.distribution
+    eta = jnp.asarray(p.eta)
     h, transmit, eta_i, eta_o, valid = _geometry(p, wi, wo)
     ci, co = dot(wi, h), dot(wo, h)
-    F = fresnel_dielectric(ci, p.eta)[0]
-    D = md.D(kind, h, ax, ay)
-    G = md.G2(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated")
-    zz = jnp.abs(wi.z * wo.z)
-    ok = valid & (zz > 0) & (G > 0)
-    zz = jnp.where(ok, zz, 1.0)
-    f_r = F * D * G / (4.0 * zz)
-    den = eta_i * ci + eta_o * co
-    den2 = jnp.where(ok & transmit, den * den, 1.0)  # >= (eta - 1)^2 > 0 for a refraction pair
-    f_t = jnp.abs(ci * co) / zz * eta_o * eta_o * (1.0 - F) * D * G / den2
-    f = jnp.where(ok, jnp.where(transmit, f_t, f_r), 0.0)
-    return with_bands(f)
+    # Fresnel from wi's side: eta_t / eta_i is eta outside, 1 / eta inside
+    inside = wi.z < 0
+    eta_it = jnp.where(inside, 1.0 / eta, eta)
+    r, t, d = fresnel_dielectric_terms(jnp.abs(ci), eta_it, jnp.where(inside, eta, 1.0 / eta))
+    d_num, d_den = md.D_terms(kind, h, ax, ay)
+    g_num, g_den = md.G2_terms(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated")
+    #   f_r = (r/d) D G2 / (4 |zi zo|),  f_t = |ci co| eta_o^2 (t/d) D G2 / (|zi zo| den^2)
+    den = eta_i * ci + eta_o * co  # >= |eta - 1| |h| > 0 for a refraction pair
+    num = d_num * g_num * jnp.where(transmit, jnp.abs(ci * co) * eta_o * eta_o * t, r)
+    q = d * d_den * g_den * jnp.where(transmit, den * den, 4.0)
+    ok = valid & (q > 0)
+    # safe-where: the masked branch divides by 1, so gradients stay finite at grazing
+    return with_bands(jnp.where(ok, num / jnp.where(ok, q, 1.0), 0.0))
 
 
 def _pdf_geom(p: Params, wi: Vec3, wo: Vec3, h, transmit, eta_i, eta_o, ok):

@@ -96,6 +96,7 @@ import jax.numpy as jnp
 
 from ..core import warp
 from ..core.frame import reflect
+from ..core.fusion import materialize
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import Bands, param, params_class, Real, static
 from ..core.rng import uniforms
@@ -104,7 +105,7 @@ from ..microfacet import coat_tables as ct
 from ..microfacet import distribution as md
 from ..microfacet.coat_tables import TABLES
 from ..microfacet.interface_integrals import CoatTables
-from ..optics.fresnel import fresnel_dielectric
+from ..optics.fresnel import fresnel_dielectric_terms
 
 
 @params_class
@@ -165,21 +166,26 @@ def _eval_with(p: Params, tab: CoatTables, wi: Vec3, wo: Vec3):
     kind, alpha, eta = p.distribution, jnp.asarray(p.alpha), jnp.asarray(p.eta)
     active = _active(wi, wo)
     h = normalize(wi + wo)
-    D = md.D(kind, h, alpha)
+    # F D G2 / (4 cos_i cos_o) as one quotient: F, D and G2 / (cos_i cos_o) are fractions whose
+    # denominators multiply into one division per pair (as rough_dielectric; issue 20)
+    r, _, d = fresnel_dielectric_terms(jnp.clip(dot(wi, h), 0.0, 1.0), eta)
+    d_num, d_den = md.D_terms(kind, h, alpha)
     # reflection only: no transmission branch (its Beta function would be computed and discarded)
-    G = md.G2(kind, wi, wo, h, alpha, correlated=p.shadowing == "correlated", reflection_only=True)
-    F = fresnel_dielectric(jnp.clip(dot(wi, h), 0.0, 1.0), eta)[0]
-    den = 4.0 * wi.z * wo.z
-    ok = active & (den > 0)
+    g_num, g_den = md.G2_terms(kind, wi, wo, h, alpha, correlated=p.shadowing == "correlated",
+                               reflection_only=True)
+    q = 4.0 * d * d_den * g_den
+    ok = active & (q > 0)
     # safe-where: the masked branch divides by 1, so gradients stay finite at grazing
-    spec = jnp.where(ok, F * D * G / jnp.where(ok, den, 1.0), 0.0)
+    spec = jnp.where(ok, r * d_num * g_num / jnp.where(ok, q, 1.0), 0.0)
     transmittance = ct.transmittance_lookup(p.tables, tab)  # resampled once, looked up twice
-    T_i = transmittance(wi.z)
-    T_o = transmittance(wo.z)
+    diff_geom = jnp.where(active, transmittance(wi.z) * transmittance(wo.z) * (1.0 / (jnp.pi * eta * eta)), 0.0)
+    # the per-pair values are stored before the broadcast over the bands: XLA:CPU does not fuse
+    # a gather or a quotient into a consumer that reads it once per band, and left to itself
+    # split the evaluation into 15 kernels (about 2x slower; issue 20)
+    spec, diff_geom = materialize((spec, diff_geom))
     rho = as_bands(p.diffuse_reflectance)
-    r = rho if p.nonlinear else 1.0
-    diff = rho / (1.0 - r * with_bands(tab.internal_reflectance))
-    diff_geom = jnp.where(active, T_i * T_o / (jnp.pi * eta * eta), 0.0)
+    r_int = rho if p.nonlinear else 1.0
+    diff = rho / (1.0 - r_int * with_bands(tab.internal_reflectance))
     return with_bands(spec) * as_bands(p.specular_reflectance) + diff * with_bands(diff_geom)
 
 

@@ -200,7 +200,7 @@ def _beta1p_parts(a, b):
     # no two large terms cancel. log(Y / Z) is multiplied by Y and must be accurate when y >> x
     # (Y / Z -> 1): with t = x / (Z + Y) in (0, 1/3] (x <= y), Y / Z = (1 - t) / (1 + t) and
     # log(Y / Z) = -2 atanh(t), whose Taylor series in t^2 <= 1/9 is cheaper than a log here.
-    t = x / (big_z + big_y)
+    t = x * (1.0 / (big_z + big_y))  # not x / (...): XLA:CPU would store a quotient read twice
     t2 = t * t
     n_atanh = 17 if n_terms > 3 else 7
     poly = 1.0 / (2 * n_atanh - 1)

@@ -49,14 +49,22 @@ _A_MAX = 30.0  # beyond a = 30, erf(a) = 1 and exp(-a^2) = 0 in double precision
 _NEWTON_ITERS = 24
 
 
-def D(m: Vec3, ax, ay):
-    """Beckmann normal distribution D(m) in 1/sr; 0 for m_z <= 0 (Walter et al. 2007, Eq. 25)."""
+def D_terms(m: Vec3, ax, ay):
+    """``(num, den)`` with D(m) = num / den: (exp(-tan^2 / alpha^2), pi ax ay m_z^4), and (0, 1)
+    for m_z <= 0 (see :func:`appearance_jax.microfacet.ggx.D_terms`)."""
     z2 = m.z * m.z
     up = (m.z > 0) & (z2 > 0)
     z2s = jnp.where(up, z2, 1.0)
-    e = ((m.x / ax) ** 2 + (m.y / ay) ** 2) / z2s
+    iax, iay = 1.0 / ax, 1.0 / ay
+    e = ((m.x * iax) ** 2 + (m.y * iay) ** 2) / z2s
     # exp(-e) underflows to 0 before 1/z^4 overflows for directions near the horizon
-    return jnp.where(up, jnp.exp(-e) / (jnp.pi * ax * ay * z2s * z2s), 0.0)
+    return jnp.where(up, jnp.exp(-e), 0.0), jnp.pi * ax * ay * z2s * z2s
+
+
+def D(m: Vec3, ax, ay):
+    """Beckmann normal distribution D(m) in 1/sr; 0 for m_z <= 0 (Walter et al. 2007, Eq. 25)."""
+    num, den = D_terms(m, ax, ay)
+    return num / den
 
 
 def projected_area(w: Vec3, ax, ay):

@@ -29,12 +29,22 @@ from ..core.special import safe_sqrt
 from ..core.vec import Vec3, cross, normalize
 
 
-def D(m: Vec3, ax, ay):
-    """GGX normal distribution D(m) in 1/sr; 0 for m_z <= 0 (Walter et al. 2007, Eq. 33)."""
-    q = (m.x / ax) ** 2 + (m.y / ay) ** 2 + m.z * m.z
+def D_terms(m: Vec3, ax, ay):
+    """``(num, den)`` with D(m) = num / den: (1, pi ax ay q^2), and (0, 1) for m_z <= 0.
+
+    For a BSDF that folds D into its own division (one divide instead of two per element).
+    The 1/ax, 1/ay are taken once on the parameters' shape, not per element."""
+    iax, iay = 1.0 / ax, 1.0 / ay
+    q = (m.x * iax) ** 2 + (m.y * iay) ** 2 + m.z * m.z
     up = (m.z > 0) & (q > 0)
     qs = jnp.where(up, q, 1.0)
-    return jnp.where(up, 1.0 / (jnp.pi * ax * ay * qs * qs), 0.0)
+    return jnp.where(up, 1.0, 0.0), jnp.pi * ax * ay * qs * qs
+
+
+def D(m: Vec3, ax, ay):
+    """GGX normal distribution D(m) in 1/sr; 0 for m_z <= 0 (Walter et al. 2007, Eq. 33)."""
+    num, den = D_terms(m, ax, ay)
+    return num / den
 
 
 def projected_area(w: Vec3, ax, ay):
