@@ -237,16 +237,14 @@ def transmittance_lookup(scheme: str, tab: CoatTables):
     # a matrix product, which XLA materialises (a Clenshaw series here would be fused into
     # the gathers and summed per direction again, ~10x slower)
     nodes = jnp.clip(jnp.asarray(_resampling_matrix(), T.dtype) @ T, 0.0, 1.0)
-    # each cell's value and slope: two gathers at the same index per direction (nodes[i] and
-    # nodes[i + 1] cost ~25% more on XLA:CPU), the same values bit for bit
-    base, slope = nodes[:-1], nodes[1:] - nodes[:-1]
 
     def lookup(mu):
         x = safe_sqrt(jnp.clip(mu, 0.0, 1.0)) * N_RESAMPLE
         i = jnp.minimum(jnp.floor(x), N_RESAMPLE - 1.0)
         t = x - i
         i = i.astype(jnp.int32)
-        return base[i] + t * slope[i]
+        v0, v1 = nodes[i], nodes[i + 1]
+        return v0 + t * (v1 - v0)
 
     return lookup
 
