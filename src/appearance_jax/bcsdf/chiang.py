@@ -70,7 +70,9 @@ Example::
     S = chiang.eval(p, wi, wo, h=0.2)                                     # shape (3,), 1/sr
     S_far = chiang.eval(p.replace(far_field=True), wi, wo)                # h integrated out
 
-Validation (flatland, closed forms, Mitsuba 3's ``hair``): docs/hair.md.
+Validation (flatland, closed forms, Mitsuba 3's ``hair``): docs/hair.md. In float32, atan2,
+arcsin, exp I0e and the Fresnel term take the short forms of :mod:`appearance_jax.bcsdf.fast32`
+(a few ulp; tests/bcsdf/test_chiang_fast32.py); float64 is computed as before.
 """
 
 from __future__ import annotations
@@ -84,12 +86,12 @@ from jax.scipy.special import i0e
 
 from ..core.frame import fiber_angles, fiber_direction
 from ..core.model import Model, as_bands, boundary
-from ..core.params import Bands, integer, param, params_class, Real, static
+from ..core.params import Bands, integer, param, params_class, Real, replace_unchecked, static
 from ..core.rng import uniforms
-from ..core.special import atan2, safe_asin, safe_sqrt
+from ..core.special import safe_asin, safe_sqrt
 from ..core.spectral import luminance_or_mean
 from ..core.vec import Vec3
-from . import fiber
+from . import fast32, fiber
 
 P_MAX = 3  # lobes R, TT, TRT + residual
 _DEFAULT_SIGMA_A = tuple(1.3 * c for c in fiber.EUMELANIN_RGB)
@@ -207,15 +209,28 @@ def _lobe_probabilities(A):
                      .reshape((4,) + (1,) * (w.ndim - 1)))
 
 
-def _lobe_terms(p: Params, si, ci, so, co, dphi, h):
-    """Per-lobe lists [A_p (..., bands)], [M_p (...)], [N_p (...)], p = R, TT, TRT, residual, from
-    sines and cosines (ci, co >= 0) and phi_o - phi_i: the tilted lobes by angle addition,
-    sin^2((ti + to)/2) as a squared chord (no cancellation near the specular cone), so the only
-    transcendental calls per pair are the i0e/exp of M_p, the exp of N_p and T, and the two asin
-    of Phi(p, h). Lists, not arrays stacked on a lobe axis: XLA:CPU runs elementwise work
-    broadcast over a leading lobe axis (and reductions over it) several times slower than the
-    same work written per lobe (measured: M_p 32 ms vs 6 ms per 1e6 pairs)."""
-    A = fiber.smooth_attenuation_sc(h, si, ci, p.eta, as_bands(p.sigma_a), p_max=P_MAX)
+def _store(tree):
+    """The arrays of ``tree`` unchanged (x / 1 = x exactly), computed once and stored: the shared
+    values that XLA:CPU would otherwise fuse into, and recompute in, each consumer.
+
+    Not :func:`core.fusion.materialize`: its divisor is a scalar, and XLA's simplifier turns a
+    division by a broadcast scalar into a multiplication by its reciprocal, which it then
+    duplicates like any cheap op (seen here: the atan2 of phi_o - phi_i recomputed in each of
+    the three N_p). A per-element divisor ``where(v == v, 1, 1)`` is not folded (v == v is
+    false for NaN), so the divide, and the store, stay."""
+    one = jax.lax.optimization_barrier(jnp.ones((), jnp.result_type(float)))
+
+    def keep(v):
+        v = jnp.asarray(v)
+        return v / jnp.where(v == v, one.astype(v.dtype), 1.0)
+
+    return jax.tree.map(keep, tree)
+
+
+def _m_lobes(p: Params, si, ci, so, co):
+    """[M_p], p = R, TT, TRT, residual, from sines and cosines (ci, co >= 0): the tilted lobes by
+    angle addition, sin^2((ti + to)/2) as a squared chord (no cancellation near the specular
+    cone), exp(-2k s^2) I0e(k cp co) as one exponential (:func:`fast32.exp_i0e`)."""
     M = []
     for shift, v in zip((-2.0 * p.alpha, p.alpha, 4.0 * p.alpha, 0.0 * p.alpha), longitudinal_variances(p.beta_m)):
         ca, sa = jnp.cos(shift), jnp.sin(shift)
@@ -223,12 +238,34 @@ def _lobe_terms(p: Params, si, ci, so, co, dphi, h):
         cp = jnp.abs(ci * ca - si * sa)   # |cos(theta_i + a_p)|: the fold of _fold
         k = 1.0 / v
         s2 = 0.25 * ((cp - co) ** 2 + (sp + so) ** 2)  # sin^2((tp + to)/2) = |(cp, sp) - (co, -so)|^2 / 4
-        M.append(k / -jnp.expm1(-2.0 * k) * jnp.exp(-2.0 * k * s2) * i0e(k * cp * co))
+        M.append(k / -jnp.expm1(-2.0 * k) * fast32.exp_i0e(-2.0 * k * s2, k * cp * co))
+    return M
+
+
+def _n_lobes(p: Params, dphi, h, eta_p):
+    """[N_p], p = R, TT, TRT, residual (uniform), of phi_o - phi_i = ``dphi``. gamma_i and gamma_t
+    are stored once (_store): fused into each lobe, XLA:CPU would recompute both arcsines
+    three times."""
     s = azimuthal_scale(p.beta_n)
-    eta_p = fiber.bravais_eta_sc(p.eta, si, ci)
-    N = [azimuthal_lobe(dphi - fiber.exit_azimuth(j, h, eta_p), s) for j in range(P_MAX)]
+    g_i, g_t = _store((fast32.asin(h), fast32.asin(h / eta_p)))
+    norm, inv_s = 1.0 / (s * jnp.tanh(jnp.pi / (2.0 * s))), 1.0 / s
+    N = []
+    for j in range(P_MAX):  # the trimmed logistic (azimuthal_lobe) about Phi(j, h) (fiber.exit_azimuth)
+        e = jnp.exp(-jnp.abs(fiber.wrap_pi(dphi - (2.0 * j * g_t - 2.0 * g_i + j * jnp.pi))) * inv_s)
+        N.append(e / (1.0 + e) ** 2 * norm)
     N.append(jnp.full(jnp.shape(N[0]), 1.0 / (2.0 * jnp.pi), dtype=N[0].dtype))
-    return [A[j] for j in range(P_MAX + 1)], M, N
+    return N
+
+
+def _lobe_terms(p: Params, si, ci, so, co, dphi, h):
+    """Per-lobe lists [A_p (..., bands)], [M_p (...)], [N_p (...)], p = R, TT, TRT, residual, from
+    sines and cosines (ci, co >= 0) and phi_o - phi_i. Lists, not arrays stacked on a lobe axis:
+    XLA:CPU runs elementwise work broadcast over a leading lobe axis (and reductions over it)
+    several times slower than the same work written per lobe (measured: M_p 32 ms vs 6 ms per
+    1e6 pairs)."""
+    A = fiber.smooth_attenuation_sc(h, si, ci, p.eta, as_bands(p.sigma_a), p_max=P_MAX)
+    N = _n_lobes(p, dphi, h, fiber.bravais_eta_sc(p.eta, si, ci))
+    return [A[j] for j in range(P_MAX + 1)], _m_lobes(p, si, ci, so, co), N
 
 
 def _direction_sc(wi: Vec3, wo: Vec3):
@@ -236,7 +273,7 @@ def _direction_sc(wi: Vec3, wo: Vec3):
     shape = jnp.broadcast_shapes(jnp.shape(wi.x), jnp.shape(wo.x))
     ci = jnp.sqrt(wi.y * wi.y + wi.z * wi.z)
     co = jnp.sqrt(wo.y * wo.y + wo.z * wo.z)
-    dphi = atan2(wi.y * wo.z - wi.z * wo.y, wi.y * wo.y + wi.z * wo.z)
+    dphi = fast32.atan2(wi.y * wo.z - wi.z * wo.y, wi.y * wo.y + wi.z * wo.z)
     return tuple(jnp.broadcast_to(a, shape) for a in (wi.x, ci, wo.x, co, dphi))
 
 
@@ -273,9 +310,98 @@ def _finite(x):
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3, h=0.0):
+    if not p.far_field:
+        return _eval_near(p, wi, wo, h)
     f, _, cos_o = _sum_terms(p, wi, wo, h)
     ok = (cos_o > 0)[..., None]
     return _finite(jnp.where(ok, f / jnp.where(ok, cos_o[..., None], 1.0), 0.0))
+
+
+# pairs per step of the near-field eval loop: the intermediates of one step stay in cache
+# (measured on a 2-core EPYC: 8192-32768 alike, 4096 slower)
+_CHUNK = 8192
+_GROUPS = 16  # see _eval_near
+
+
+def _per_pair(p: Params, names, values):
+    """``p`` with the per-pair parameters ``names`` set to ``values`` (no checks: traced)."""
+    return replace_unchecked(p, **dict(zip(names, values))) if names else p
+
+
+def _near_bands(p: Params, wix, wiy, wiz, wox, woy, woz, h, sigma_a):
+    """S(wi, wo; h) bands first: (bands,) + shape of the inputs (all of one shape); ``sigma_a``
+    is (bands,) + that shape or broadcasts to it. The band-independent factors are stored (_store) before the per-band sums:
+    XLA:CPU would otherwise fuse them, M_p's polynomials included, into the band loop and
+    recompute them for every band."""
+    si, ci, so, co, dphi = _direction_sc(Vec3(wix, wiy, wiz), Vec3(wox, woy, woz))
+    f, chord = fiber.attenuation_factors(h, si, ci, p.eta)
+    M = _m_lobes(p, si, ci, so, co)
+    N = _n_lobes(p, _store(dphi), h, fiber.bravais_eta_sc(p.eta, si, ci))
+    ok = co > 0
+    inv_co = jnp.where(ok, 1.0 / jnp.where(ok, co, 1.0), 0.0)
+    w = _store([m * n * inv_co for m, n in zip(M, N)])
+    f, chord = _store((f, chord))
+    A = fiber.lobe_attenuations(f, jnp.exp(-sigma_a * chord), p_max=P_MAX)
+    return _finite(sum(a * wj for a, wj in zip(A, w)))
+
+
+def _eval_near(p: Params, wi: Vec3, wo: Vec3, h):
+    """Near-field eval on one flat batch axis (directions, h and any per-pair parameter
+    broadcast and flattened), in steps of _CHUNK pairs (fori_loop), each computed bands first
+    (:func:`_near_bands`) and written into the (n, bands) result band by band. Float32 takes
+    the short special functions of :mod:`fast32` (float64: the exact ones).
+
+    Why (measured, 1e6 float32 pairs, XLA:CPU, benchmarks/hair_throughput.py): a minor band
+    axis of 3 keeps the per-band loops from vectorising, and XLA fuses the whole per-pair
+    computation into them (3x the work); every intermediate of a 1e6-pair batch is a fresh
+    4 MB buffer whose page faults cost about as much as the arithmetic (the 40-odd
+    intermediates of this kernel: ~half its time). In steps of 8192 pairs they stay in cache.
+    Bands-major blocks gathered by one transpose at the end cost a further 12 MB copy."""
+    sig = as_bands(p.sigma_a)
+    nb = sig.shape[-1]
+    cols = [wi.x, wi.y, wi.z, wo.x, wo.y, wo.z, h]
+    scal = {k: jnp.asarray(getattr(p, k)) for k in ("eta", "beta_m", "beta_n", "alpha")}
+    batch = jnp.broadcast_shapes(*(jnp.shape(c) for c in cols), *(v.shape for v in scal.values()), sig.shape[:-1])
+    n = math.prod(batch)
+    dtype = jnp.result_type(*cols, float)
+    cols = [jnp.broadcast_to(jnp.asarray(c, dtype), batch).reshape(n) for c in cols]
+    # parameters that vary per pair ride along the batch axis; constant ones stay scalars
+    per_pair = [k for k, v in scal.items() if v.ndim]
+    cols += [jnp.broadcast_to(scal[k], batch).reshape(n) for k in per_pair]
+    if sig.ndim > 1:
+        cols += list(jnp.moveaxis(jnp.broadcast_to(sig, batch + (nb,)).reshape(n, nb), -1, 0))
+    if n <= _CHUNK:
+        s_a = jnp.stack(cols[7 + len(per_pair):]) if sig.ndim > 1 else sig[:, None]
+        return _near_bands(_per_pair(p, per_pair, cols[7:]), *cols[:7], s_a).T.reshape(batch + (nb,))
+    # (groups, m) with the steps along m: a batch split over devices (contiguous shards) is
+    # split along the groups, so that each device steps through its own pairs (stepping
+    # along a sharded axis would gather the whole batch on every device)
+    g = _GROUPS
+    while n % g:
+        g //= 2
+    m, c = n // g, max(_CHUNK // g, 1)
+    cols = [x.reshape(g, m) for x in cols]
+    sig_const = sig.reshape(nb, 1, 1) if sig.ndim == 1 else None
+
+    def run(xs):
+        s_a = jnp.stack(xs[7 + len(per_pair):]) if sig.ndim > 1 else sig_const
+        return _near_bands(_per_pair(p, per_pair, xs[7:]), *xs[:7], s_a)
+
+    steps, last = -(-m // c), max(m - c, 0)
+    c = min(c, m)
+
+    def step(i, out):  # the last step starts at m - c: it overlaps the one before, no padding
+        start = jnp.minimum(i * c, last)
+        # checkpointed, the slicing included: reverse mode keeps only the step index per step and
+        # recomputes the block (storing the ~40 intermediates of 1e6 pairs made grad 2.5x slower)
+        block = jax.checkpoint(lambda st: run([jax.lax.dynamic_slice_in_dim(x, st, c, axis=1) for x in cols]))(start)
+        for b in range(nb):  # one strided column per band: no (bands, ...) -> (..., bands) copy
+            out = jax.lax.dynamic_update_slice(out, block[b][..., None], (0, start, b))
+        return out
+
+    out_dtype = jax.eval_shape(run, [x[:, :c] for x in cols]).dtype
+    out = jax.lax.fori_loop(0, steps, step, jnp.zeros((g, m, nb), out_dtype))
+    return out.reshape(batch + (nb,))
 
 
 def _pdf(p: Params, wi: Vec3, wo: Vec3, h=0.0):

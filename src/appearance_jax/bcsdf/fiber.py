@@ -25,7 +25,7 @@ from ..core.frame import Frame
 from ..core.fusion import materialize
 from ..core.special import safe_acos, safe_asin, safe_sqrt
 from ..core.vec import Vec3
-from ..optics.fresnel import fresnel_dielectric
+from .fast32 import fresnel_outside
 
 # Chiang et al. 2016 (as in pbrt-v3): absorption per unit radius of one unit of eumelanin /
 # pheomelanin concentration, linear RGB
@@ -203,20 +203,34 @@ def smooth_attenuation_sc(h, sin_ti, cos_ti, eta, sigma_a, p_max: int = 4):
     calls: cos(gamma_t) = sqrt(1 - (h / eta')^2))."""
     h = jnp.asarray(h)
     sigma_a = jnp.atleast_1d(jnp.asarray(sigma_a))
+    f, chord = attenuation_factors(h, sin_ti, cos_ti, eta)
+    return jnp.stack(lobe_attenuations(f[..., None], jnp.exp(-sigma_a * chord[..., None]), p_max))
+
+
+def attenuation_factors(h, sin_ti, cos_ti, eta):
+    """(f, l): the dielectric Fresnel reflectance f at cos(theta_i) cos(gamma_i) (true 3D angle,
+    true index) and the path length l = 2 cos(gamma_t) / cos(theta_t) through the fiber, so
+    that the transmittance of one pass is T = exp(-sigma_a l) (spec M18; see
+    :func:`smooth_attenuation`). cos_ti >= 0. In float32 the Fresnel term is
+    :func:`fast32.fresnel_outside`'s short form."""
     cos_gi = safe_sqrt(1.0 - h * h)
-    f, _, _, _ = fresnel_dielectric(cos_ti * cos_gi, eta)
+    f = fresnel_outside(cos_ti * cos_gi, eta)
     sin_gt = h / bravais_eta_sc(eta, sin_ti, cos_ti)
     cos_gt = safe_sqrt(1.0 - sin_gt * sin_gt)
     sin_tt = sin_ti / eta
     cos_tt = safe_sqrt(1.0 - sin_tt * sin_tt)
-    T = jnp.exp(-sigma_a * (2.0 * cos_gt / cos_tt)[..., None])
-    f = f[..., None]
+    return f, 2.0 * cos_gt / cos_tt
+
+
+def lobe_attenuations(f, T, p_max: int = 4):
+    """[A_0, ..., A_{p_max-1}, A_residual] from the Fresnel reflectance f and the one-pass
+    transmittance T (broadcasting, e.g. f (..., 1) against T (..., bands)): A_0 = f,
+    A_1 = (1 - f)^2 T, A_p = A_{p-1} T f, residual A_{p_max-1} f T / (1 - f T)."""
     A = [f * jnp.ones_like(T), (1.0 - f) ** 2 * T]
     for _ in range(2, p_max):
         A.append(A[-1] * T * f)
     ft = f * T
-    A.append(A[p_max - 1] * ft / jnp.where(ft < 1, 1.0 - ft, 1.0))
-    return jnp.stack(A[: p_max] + [A[-1]])
+    return A[:p_max] + [A[p_max - 1] * ft / jnp.where(ft < 1, 1.0 - ft, 1.0)]
 
 
 def melanin_sigma_a_rgb(eumelanin, pheomelanin):
