@@ -330,9 +330,9 @@ def _per_pair(p: Params, names, values):
 
 def _near_bands(p: Params, wix, wiy, wiz, wox, woy, woz, h, sigma_a):
     """S(wi, wo; h) bands first: (bands,) + shape of the inputs (all of one shape); ``sigma_a``
-    is (bands,) + that shape or broadcasts to it. The band-independent factors are stored (_store) before the per-band sums:
-    XLA:CPU would otherwise fuse them, M_p's polynomials included, into the band loop and
-    recompute them for every band."""
+    is (bands,) + that shape or broadcasts to it. The band-independent factors are stored
+    (_store) before the per-band sums: XLA:CPU would otherwise fuse them, M_p's polynomials
+    included, into the band loop and recompute them for every band."""
     si, ci, so, co, dphi = _direction_sc(Vec3(wix, wiy, wiz), Vec3(wox, woy, woz))
     f, chord = fiber.attenuation_factors(h, si, ci, p.eta)
     M = _m_lobes(p, si, ci, so, co)
@@ -387,8 +387,7 @@ def _eval_near(p: Params, wi: Vec3, wo: Vec3, h):
         s_a = jnp.stack(xs[7 + len(per_pair):]) if sig.ndim > 1 else sig_const
         return _near_bands(_per_pair(p, per_pair, xs[7:]), *xs[:7], s_a)
 
-    steps, last = -(-m // c), max(m - c, 0)
-    c = min(c, m)
+    steps, last = -(-m // c), m - c  # m > c (n > _CHUNK)
 
     def step(i, out):  # the last step starts at m - c: it overlaps the one before, no padding
         start = jnp.minimum(i * c, last)

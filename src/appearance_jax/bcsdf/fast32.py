@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.special import i0e
 
-from ..core.special import atan2 as _atan2_exact, safe_asin as _asin_exact, safe_sqrt
+from ..core.special import _atan2_jvp as _atan2_exact_jvp, atan2 as _atan2_exact, safe_asin as _asin_exact, safe_sqrt
 from ..optics.fresnel import fresnel_dielectric
 
 _TAN_PI_8 = 0.41421356237309503
@@ -71,11 +71,10 @@ def _atan2_single(y, x):
 
 @_atan2_single.defjvp
 def _atan2_single_jvp(primals, tangents):
-    (y, x), (dy, dx) = primals, tangents
-    r2 = x * x + y * y
-    ok = r2 > 0
-    inv = jnp.where(ok, 1.0 / jnp.where(ok, r2, 1.0), 0.0)
-    return _atan2_single(y, x), (x * dy - y * dx) * inv
+    # the tangent of core.special.atan2's rule, (x dy - y dx) / (x^2 + y^2) (0 at the origin);
+    # its exact primal is unused (removed by dead-code elimination)
+    _, tangent = _atan2_exact_jvp(primals, tangents)
+    return _atan2_single(*primals), tangent
 
 
 def atan2(y, x):
