@@ -26,9 +26,6 @@ def test_matches_fresnel_dielectric(eta):
     tir = (1.0 - c * c) > eta * eta
     assert np.all(t[tir] == 0.0)
     np.testing.assert_allclose(r[tir & ok] / d[tir & ok], 1.0, rtol=1e-15)
-    # inv_eta passed in gives the same values
-    r2, _, d2 = fresnel_dielectric_terms(jnp.asarray(c), eta, 1.0 / eta)
-    np.testing.assert_allclose(np.asarray(r2)[ok] / np.asarray(d2)[ok], F[ok], rtol=1e-12, atol=1e-15)
 
 
 def test_transmittance_does_not_cancel_near_grazing():
@@ -41,13 +38,23 @@ def test_transmittance_does_not_cancel_near_grazing():
     np.testing.assert_allclose(np.asarray(t32) / np.asarray(d32), ref, rtol=1e-5)
 
 
-def test_float32_against_float64():
-    c = np.linspace(0.0, 1.0, 1001)[1:]
-    for eta in (1.5, 1 / 1.5, 2.4):
-        r, t, d = fresnel_dielectric_terms(jnp.asarray(c, jnp.float32), jnp.float32(eta))
-        F = np.asarray(fresnel_dielectric(jnp.asarray(c), eta)[0])
-        assert np.asarray(r).dtype == np.float32
-        np.testing.assert_allclose(np.asarray(r) / np.asarray(d), F, rtol=2e-6, atol=2e-6)
+def test_float32_as_accurate_as_fresnel_dielectric():
+    """float32 against float64 at the same (float32-rounded) inputs, critical angles included,
+    with eta per element (as the rough dielectric passes it): no worse than
+    fresnel_dielectric's own float32 rounding. With one scalar eta < 1 the error near the
+    critical angle may triple (the docstring), so that case is held to 4x."""
+    c = np.linspace(0.0, 1.0, 4001)[1:].astype(np.float32)
+    for eta in (1.5, 1 / 1.5, 2.4, 0.7):
+        e32 = np.float32(eta)
+        ref = np.asarray(fresnel_dielectric(jnp.asarray(c, jnp.float64), float(e32))[0])
+        old = np.asarray(fresnel_dielectric(jnp.asarray(c), jnp.asarray(e32))[0], dtype=float)
+        tol = np.max(np.abs(old - ref))
+        for e_arg, k in ((jnp.full(c.shape, e32), 1.0), (jnp.asarray(e32), 4.0)):
+            r, t, d = fresnel_dielectric_terms(jnp.asarray(c), e_arg)
+            assert r.dtype == jnp.float32
+            r, t, d = (np.asarray(x, dtype=float) for x in (r, t, d))
+            for got, want in ((r / d, ref), (t / d, 1.0 - ref)):
+                assert np.max(np.abs(got - want)) <= k * tol + 1e-7, (eta, k)
 
 
 def test_gradients_finite_at_grazing_normal_and_critical_angle():

@@ -131,9 +131,7 @@ def _eval(p: Params, wi: Vec3, wo: Vec3):
     h, transmit, eta_i, eta_o, valid = _geometry(p, wi, wo)
     ci, co = dot(wi, h), dot(wo, h)
     # Fresnel from wi's side: eta_t / eta_i is eta outside, 1 / eta inside
-    inside = wi.z < 0
-    eta_it = jnp.where(inside, 1.0 / eta, eta)
-    r, t, d = fresnel_dielectric_terms(jnp.abs(ci), eta_it, jnp.where(inside, eta, 1.0 / eta))
+    r, t, d = fresnel_dielectric_terms(jnp.abs(ci), jnp.where(wi.z < 0, 1.0 / eta, eta))
     d_num, d_den = md.D_terms(kind, h, ax, ay)
     g_num, g_den = md.G2_terms(kind, wi, wo, h, ax, ay, correlated=p.shadowing == "correlated")
     #   f_r = (r/d) D G2 / (4 |zi zo|),  f_t = |ci co| eta_o^2 (t/d) D G2 / (|zi zo| den^2)

@@ -148,15 +148,13 @@ def fresnel_dielectric(cos_i, eta):
     return F, cos_t, eta_it, eta_ti
 
 
-def fresnel_dielectric_terms(cos_i, eta, inv_eta=None):
+def fresnel_dielectric_terms(cos_i, eta):
     """``(r, t, d)`` with F = r / d and 1 - F = t / d: the unpolarised reflectance and
     transmittance of a dielectric as fractions over one denominator, for a BSDF that folds
     them into its own single division (the hot loop of the rough dielectric and plastic).
 
-    ``cos_i`` in [0, 1] (values above 1 are clamped); ``eta`` = eta_t / eta_i; ``inv_eta`` = 1 / eta,
-    passed in where it is cheaper than a division per element (a select between two scalars).
-    With A, B = c -+ eta c_t and C, E = eta c -+ c_t (the numerators and denominators of
-    r_s, r_p):
+    ``cos_i`` in [0, 1] (values above 1 are clamped); ``eta`` = eta_t / eta_i. With
+    A, B = c -+ eta c_t and C, E = eta c -+ c_t (the numerators and denominators of r_s, r_p):
 
         r = A^2 E^2 + C^2 B^2,    t = 4 eta c c_t (B^2 + E^2),    d = 2 B^2 E^2
 
@@ -164,11 +162,14 @@ def fresnel_dielectric_terms(cos_i, eta, inv_eta=None):
     same for p), so r + t = d and nothing cancels in 1 - F near grazing. Under total internal
     reflection c_t = 0 gives r = d, t = 0 (F = 1) without a select; d > 0 except at cos_i = 0
     under total internal reflection, which the caller masks. Same values as
-    :func:`fresnel_dielectric` (to rounding), three divisions fewer.
+    :func:`fresnel_dielectric` (to rounding, and its float32 accuracy where ``eta`` varies
+    per element) with two divisions fewer. Float32 with one ``eta`` for all elements and
+    eta < 1: near the critical angle XLA:CPU may divide by eta^2 as a multiplication by its
+    rounded reciprocal, which costs some accuracy there (about 3x the error of
+    :func:`fresnel_dielectric`, ~1e-5 instead of ~3e-6, a few ulp of the cosine from it).
     """
     c = jnp.minimum(cos_i, 1.0)
-    inv_eta = 1.0 / eta if inv_eta is None else inv_eta
-    ct = safe_sqrt(1.0 - (1.0 - c * c) * (inv_eta * inv_eta))
+    ct = safe_sqrt(1.0 - (1.0 - c * c) / (eta * eta))
     a, b = c - eta * ct, c + eta * ct
     cp, e = eta * c - ct, eta * c + ct
     b2, e2 = b * b, e * e
