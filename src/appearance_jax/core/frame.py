@@ -16,6 +16,7 @@ pole (theta_d, phi_d).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 from .special import safe_acos, safe_atan2, safe_sqrt
@@ -63,6 +64,13 @@ def spherical_direction(theta, phi) -> Vec3:
     """Unit vector with polar angle ``theta`` from +z and azimuth ``phi`` from +x (radians)."""
     st = jnp.sin(theta)
     return Vec3(st * jnp.cos(phi), st * jnp.sin(phi), jnp.cos(theta))
+
+
+@jax.jit
+def spherical_directions(theta_i, phi_i, theta_o, phi_o):
+    """(wi, wo) of :func:`spherical_direction`, as one compiled program: for tables converted
+    eagerly (op by op, the two directions take six small XLA programs)."""
+    return spherical_direction(theta_i, phi_i), spherical_direction(theta_o, phi_o)
 
 
 def spherical_angles(w: Vec3):

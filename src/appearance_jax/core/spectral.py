@@ -36,6 +36,8 @@ import functools
 import jax.numpy as jnp
 import numpy as np
 
+from .arrays import namespace
+
 RGB_WAVELENGTHS = (650.0, 510.0, 475.0)  # nm, [T:526] of seed 000 (snake-skin thin film)
 
 # How a wavelength-dependent model (thin films) produces its output bands:
@@ -283,23 +285,26 @@ def luminance_or_mean(x) -> jnp.ndarray:
 
 
 def linear_to_srgb(linear) -> jnp.ndarray:
-    """The sRGB transfer function (encoding, IEC 61966-2-1), elementwise; no clipping.
+    """The sRGB transfer function (encoding, IEC 61966-2-1), elementwise; no clipping; numpy for
+    numpy input, jax.numpy for jax arrays.
 
     Values at or below 0.0031308 (negative ones included) use the linear segment; the
     power branch is evaluated on a clamped argument so its gradient stays finite at 0.
     """
-    x = jnp.asarray(linear)
+    xp = namespace(linear)  # numpy in, numpy out (report figures): no XLA programs
+    x = xp.asarray(linear)
     hi = x > _SRGB_THRESHOLD
-    xs = jnp.where(hi, x, _SRGB_THRESHOLD)
-    return jnp.where(hi, 1.055 * xs ** (1.0 / 2.4) - 0.055, 12.92 * x)
+    xs = xp.where(hi, x, _SRGB_THRESHOLD)
+    return xp.where(hi, 1.055 * xs ** (1.0 / 2.4) - 0.055, 12.92 * x)
 
 
 def srgb_to_linear(encoded) -> jnp.ndarray:
     """Inverse of :func:`linear_to_srgb` (decoding), elementwise; no clipping."""
-    v = jnp.asarray(encoded)
+    xp = namespace(encoded)
+    v = xp.asarray(encoded)
     hi = v > _SRGB_THRESHOLD_ENCODED
-    vs = jnp.where(hi, v, _SRGB_THRESHOLD_ENCODED)
-    return jnp.where(hi, ((vs + 0.055) / 1.055) ** 2.4, v / 12.92)
+    vs = xp.where(hi, v, _SRGB_THRESHOLD_ENCODED)
+    return xp.where(hi, ((vs + 0.055) / 1.055) ** 2.4, v / 12.92)
 
 
 __all__ = [

@@ -49,10 +49,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
-import numpy as np
 
+from ...core.arrays import namespace
 from ...core.special import safe_atan2, safe_sqrt
 
 DEG = math.pi / 180.0
@@ -65,14 +64,8 @@ class Curve(NamedTuple):
     lengths: object
 
 
-def _xp(*xs):
-    """numpy for concrete values, jax.numpy when any value is traced (a fitter differentiating
-    through a builder): building presets and weaves eagerly then compiles no XLA programs."""
-    return jnp if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs)) else np
-
-
 def _arr(*xs):
-    xp = _xp(*xs)
+    xp = namespace(*xs)
     return xp.stack([xp.asarray(x, dtype=jnp.result_type(float)) for x in xs])
 
 
@@ -112,7 +105,7 @@ def twill_coverage(over=2, under=1):
 
 def join(*curves: Curve) -> Curve:
     """Disjoint sub-curves joined by zero-length segments (jumps)."""
-    xp = _xp(curves)
+    xp = namespace(curves)
     offs = xp.concatenate([xp.asarray(c.offsets) for c in curves])
     parts = []
     for k, c in enumerate(curves):
@@ -124,7 +117,7 @@ def join(*curves: Curve) -> Curve:
 
 def pad(curve: Curve, k: int) -> Curve:
     """Pad a curve to ``k`` control points: repeat the last offset with zero-length segments."""
-    xp = _xp(curve)
+    xp = namespace(curve)
     o, ln = xp.asarray(curve.offsets), xp.asarray(curve.lengths)
     n = o.shape[-1]
     if n > k:
@@ -140,7 +133,7 @@ def stack(curves) -> Curve:
     """Families' curves -> offsets (J, K), lengths (J, K - 1), padded to the largest K."""
     k = max(int(jnp.shape(c.offsets)[-1]) for c in curves)
     padded = [pad(c, k) for c in curves]
-    xp = _xp(padded)
+    xp = namespace(padded)
     return Curve(xp.stack([c.offsets for c in padded], axis=-2), xp.stack([c.lengths for c in padded], axis=-2))
 
 

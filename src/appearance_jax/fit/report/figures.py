@@ -70,6 +70,46 @@ def _save(fig, path, dpi) -> None:
     _plt().close(fig)
 
 
+def _margins(fig, left, right, bottom, top, wspace=0.0, hspace=0.0):
+    """A fixed layout in inches (margins; gaps between panels): the report's figures have known
+    contents, and matplotlib's constrained layout draws each figure twice to find them (a quarter
+    of a warm run's plotting time)."""
+    w, h = fig.get_size_inches()
+    gs = fig.axes[0].get_gridspec() if fig.axes else None
+    ncol, nrow = (gs.ncols, gs.nrows) if gs is not None else (1, 1)
+    aw = (w - left - right - wspace * (ncol - 1)) / ncol
+    ah = (h - bottom - top - hspace * (nrow - 1)) / nrow
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        wspace=wspace / aw, hspace=hspace / ah)
+
+
+def _place_row(fig, axes, *, left, gaps, right, bottom, top):
+    """Place ``axes`` side by side (inches): ``gaps[k]`` between panels k and k + 1."""
+    w, h = fig.get_size_inches()
+    aw = (w - left - right - sum(gaps)) / len(axes)
+    x = left
+    for ax, g in zip(axes, tuple(gaps) + (0.0,)):
+        ax.set_position([x / w, bottom / h, aw / w, (h - bottom - top) / h])
+        x += aw + g
+
+
+def _bar_axes(fig, ax, gap=0.12, width=0.18):
+    """Axes for a colour bar right of ``ax`` (inches: gap, width), as tall as ``ax``."""
+    w, h = fig.get_size_inches()
+    b = ax.get_position()
+    return fig.add_axes([b.x1 + gap / w, b.y0, width / w, b.height])
+
+
+def _sparse_log_ticks(axis, span):
+    """Minor ticks of a log axis at 2 and 5 only, unlabelled, and none beyond 4 decades: the
+    default (2..9 in every decade, each a labelled Tick) made drawing the report's log axes
+    the slowest part of a warm run, for ticks too dense to read."""
+    from matplotlib.ticker import LogLocator, NullFormatter, NullLocator
+
+    axis.set_minor_locator(LogLocator(subs=(2.0, 5.0)) if span <= 1e4 else NullLocator())
+    axis.set_minor_formatter(NullFormatter())
+
+
 def _rgba(img):
     """(..., 3) sRGB with NaN -> (..., 4) RGBA, transparent where there is no value."""
     ok = np.isfinite(img).all(axis=-1, keepdims=True)
@@ -111,20 +151,23 @@ def maps_figure(result, *, model=None, dpi=90):
         how = "nearest in-plane sample (scattered points)"
     which = ("all samples (in-plane table)" if t.is_in_plane else
              f"in-plane subset: {p.n_rows} of {t.n_samples} directions")
-    fig, axes = plt.subplots(1, 3, figsize=(17, 5.2), dpi=dpi, constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(17, 5.2), dpi=dpi)
+    bar = 1.45  # inches right of a panel for its colour bar, ticks and (two-line) label
+    _place_row(fig, axes, left=0.75, gaps=(0.7, bar + 0.6), right=bar, bottom=0.65, top=1.1)
     for ax, img, name in ((axes[0], m_img, "measured"), (axes[1], f_img, "fitted")):
         ax.pcolormesh(xe, ye, _rgba(tone(img)), shading="flat")
         _hatch(ax, xe, ye, h_img[..., 0])
         _style_map_axes(ax, rf"{name}: $f\cos\theta_o$, log-luminance brightness")
-    tone.colorbar(fig, list(axes[:2]), label=(r"luminance of $f\cos\theta_o$ [1/sr], log: "
-                                              f"{tone.lo:.2g} to {tone.hi:.3g} ({tone.decades:.1f} decades)"))
+    tone.colorbar(fig, None, cax=_bar_axes(fig, axes[1]),
+                  label=(r"luminance of $f\cos\theta_o$ [1/sr], log:" + "\n"
+                         f"{tone.lo:.2g} to {tone.hi:.3g} ({tone.decades:.1f} decades)"))
     e = e_img[..., 0]
     lim = symmetric_limit(e)
     cmap = plt.get_cmap("RdBu_r").with_extremes(bad="black")
     im = axes[2].pcolormesh(xe, ye, np.ma.masked_invalid(e), cmap=cmap, vmin=-lim, vmax=lim, shading="flat")
     _hatch(axes[2], xe, ye, h_img[..., 0])
     _style_map_axes(axes[2], rf"$\log_{{10}}$(fitted / measured) of luminance, limits $\pm${lim:g}")
-    fig.colorbar(im, ax=axes[2], extend="both",
+    fig.colorbar(im, cax=_bar_axes(fig, axes[2]), extend="both",
                  label=rf"$\log_{{10}}$ ratio (+: model too bright; $\pm${lim:g} = x{10 ** lim:.3g})")
     for ax in axes:
         lo, hi = ax.get_xlim()
@@ -199,6 +242,8 @@ def _scatter_axes(ax, t, result, lum=False):
     ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
+    for axis in (ax.xaxis, ax.yaxis):
+        _sparse_log_ticks(axis, hi / lo)
     ax.set_xlabel("measured f [1/sr]")
     ax.set_ylabel("fitted f [1/sr]")
     e = result.metrics
@@ -212,7 +257,8 @@ def _scatter_axes(ax, t, result, lum=False):
 def scatter_figure(result, *, dpi=90):
     """The figure of ``scatter.png``: fitted against measured BRDF per band, log-log (a Figure)."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.6, 5.4), dpi=dpi, constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(5.6, 5.4), dpi=dpi)
+    _margins(fig, left=0.85, right=0.2, bottom=0.6, top=1.0)
     _scatter_axes(ax, result.table, result)
     fig.suptitle(_title(result), fontsize=9)
     return fig
@@ -287,8 +333,7 @@ def slices_figure(result, *, model=None, dpi=90):
              else [("f", "k", 0)])
     ncol = min(len(targets), 2) or 1
     nrow = int(math.ceil(len(targets) / ncol)) or 1
-    fig, axes = plt.subplots(nrow, ncol, figsize=(6.2 * ncol, 3.4 * nrow + 1.3), dpi=dpi, squeeze=False,
-                             constrained_layout=True)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(6.2 * ncol, 3.4 * nrow + 1.3), dpi=dpi, squeeze=False)
     n_low = 0
     for ax, ti in zip(axes.ravel(), targets):
         f = eval_in_plane(mdl, result.params, np.full(tod.shape, np.deg2rad(ti)), np.deg2rad(tod), t.n_bands)
@@ -312,6 +357,7 @@ def slices_figure(result, *, model=None, dpi=90):
                             label=f"{what} {name} <= floor")
         ax.set_yscale("log")
         ax.set_ylim(floor / 1.4, top * 1.6)
+        _sparse_log_ticks(ax.yaxis, top / floor)
         ax.set_xlim(-90, 90)
         ax.set_xticks(np.arange(-90, 91, 30))
         ax.axvline(ti, color="0.25", lw=1.0, ls="--", gid="mirror", label=r"mirror $\theta_o=\theta_i$")
@@ -329,8 +375,12 @@ def slices_figure(result, *, model=None, dpi=90):
         for h, lab in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(lab, h)
     per_channel = max(sum(lab.endswith(f" {chans[0][0]}") for lab in handles), 1)  # one legend column per channel
-    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", fontsize=8,
-               ncol=int(math.ceil(len(handles) / per_channel)))
+    ncol_legend = int(math.ceil(len(handles) / per_channel))
+    fig.legend(list(handles.values()), list(handles.keys()), loc="lower center", bbox_to_anchor=(0.5, 0.0),
+               fontsize=8, ncol=ncol_legend)
+    # inches: tick labels + x label (0.55) and the legend (0.17 per row) below, 4 title lines above
+    _margins(fig, left=0.8, right=0.2, bottom=0.6 + 0.17 * per_channel + 0.05, top=1.15,
+             wspace=0.9, hspace=0.85)
     if n_low:
         desc += f"; {n_low} values more than {POINT_DECADES:g} decades below the peak drawn at the floor"
     fig.suptitle(_title(result) + f"\n{desc}\neach panel: log axis from its peak down to its lowest measured "

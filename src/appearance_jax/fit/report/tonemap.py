@@ -76,15 +76,16 @@ class LogTone:
         return (f"brightness = log10 luminance of f cos theta_o from {self.lo:.3g} to {self.hi:.3g} 1/sr "
                 f"({self.decades:.1f} decades; lower values at the darkest level), hue = linear-sRGB chromaticity")
 
-    def colorbar(self, fig, axes, label=None):
-        """A grey-ramp colour bar on ``axes`` with log ticks in 1/sr (the brightness a grey sample takes)."""
+    def colorbar(self, fig, axes, label=None, cax=None):
+        """A grey-ramp colour bar beside ``axes`` (or in ``cax``) with log ticks in 1/sr (the
+        brightness a grey sample takes)."""
         from matplotlib.cm import ScalarMappable
         from matplotlib.colors import ListedColormap, LogNorm
 
         ramp = np.linspace(V_LO, V_HI, 256)
         sm = ScalarMappable(norm=LogNorm(self.lo, self.hi), cmap=ListedColormap(np.stack([ramp] * 3, axis=1)))
         sm.set_array([])
-        return fig.colorbar(sm, ax=axes, label=label or r"luminance of $f\cos\theta_o$ [1/sr] (log scale)")
+        return fig.colorbar(sm, ax=axes, cax=cax, label=label or r"luminance of $f\cos\theta_o$ [1/sr] (log scale)")
 
 
 def log_tone(rgb, *, max_decades: float = 6.0, min_decades: float = 1.0) -> LogTone:

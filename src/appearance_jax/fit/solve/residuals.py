@@ -23,8 +23,9 @@ multiply r by sqrt(w). Masked entries contribute exactly 0 and are not counted.
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
+
+from ...core.arrays import namespace
 
 METRICS = ("l2", "cos_log", "relative")
 
@@ -41,24 +42,27 @@ def check_metric(metric: str) -> str:
 
 
 def residual(f_model, f_data, cos_i, metric: str, *, floor=FLOOR):
-    """Unweighted residual of ``metric``; ``cos_i`` broadcasts against the bands axis ((N, 1))."""
+    """Unweighted residual of ``metric``; ``cos_i`` broadcasts against the bands axis ((N, 1)).
+    numpy inputs give numpy (the report's residual table), jax arrays jax arrays."""
+    xp = namespace(f_model, f_data, cos_i)
     if metric == "l2":
         return f_model - f_data
     if metric == "cos_log":
         # data can be slightly negative from noise near black: clamp so the log stays defined
-        return jnp.log1p(jnp.maximum(f_model, 0.0) * cos_i) - jnp.log1p(jnp.maximum(f_data, 0.0) * cos_i)
+        return xp.log1p(xp.maximum(f_model, 0.0) * cos_i) - xp.log1p(xp.maximum(f_data, 0.0) * cos_i)
     if metric == "relative":
-        return (f_model - f_data) / (jnp.abs(f_data) + floor)
+        return (f_model - f_data) / (xp.abs(f_data) + floor)
     raise ValueError(f"metric = {metric!r}: must be one of {', '.join(METRICS)}")
 
 
 def residual_scale(f_data, sigma, cos_i, metric: str, *, floor=FLOOR):
     """sigma of the residual (first-order propagation of the data's sigma through the metric)."""
+    xp = namespace(f_data, sigma, cos_i)
     if metric == "l2":
         return sigma
     if metric == "cos_log":
-        return sigma * cos_i / (1.0 + jnp.maximum(f_data, 0.0) * cos_i)
-    return sigma / (jnp.abs(f_data) + floor)
+        return sigma * cos_i / (1.0 + xp.maximum(f_data, 0.0) * cos_i)
+    return sigma / (xp.abs(f_data) + floor)
 
 
 def error_metrics(f_model, f_data, mask, cos_i, *, eps: float = FLOOR) -> dict:

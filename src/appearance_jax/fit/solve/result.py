@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from ..tables.table import Table
@@ -271,14 +270,15 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     """
     data = problem.data if data is None else data
     sp = problem.space
-    x = sp.x_from_z(jnp.asarray(z))
+    # jitted: op by op the transforms take a dozen small XLA programs (slices, sin, clip, ...)
+    x = jax.jit(sp.x_from_z)(np.asarray(z))
     bad = [lab for lab, v in zip(sp.labels, np.asarray(x, np.float64)) if not np.isfinite(v)]
     if bad:  # a Params cannot hold them (it would raise naming a field as if the user had set it)
         raise FitDiverged(f"the solver diverged after {int(steps)} steps: non-finite {', '.join(bad)} "
                           "(the residuals became NaN or inf); try other starts (n_starts / --starts), "
                           "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
-    out = jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl))(x, data, jnp.asarray(cl))
+    out = jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl))(x, data, np.asarray(cl))
     out = {k: np.asarray(v) for k, v in out.items()}
     x = np.asarray(x, np.float64)
     method, raw, sigma = sigma_kinds(sp, x, out)
@@ -286,7 +286,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     exact = np.asarray(out["flat"], bool)
     cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
     bound, flat = flags(sp, x, raw, [out[method]], exact)
-    params = sp.params_from_x(jnp.asarray(x))
+    params = jax.jit(sp.params_from_x)(x)
     w = np.asarray(data["weight"]) > 0
     # jitted: op by op, a coated model's eval would compile dozens of small programs
     fitted = np.asarray(jax.jit(problem.evaluate)(params, data), np.float64)

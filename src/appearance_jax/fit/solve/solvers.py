@@ -194,6 +194,7 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     t1 = time.perf_counter()
     z, loss, steps, ok = jax.block_until_ready(compiled(z0, problem.data))
     wall = time.perf_counter() - t1
+    z = np.asarray(z)  # on the host: indexing a device array is a program of its own
     loss = np.asarray(loss, np.float64)
     loss = np.where(np.isfinite(loss), loss, np.inf)
     best = int(np.argmin(loss))

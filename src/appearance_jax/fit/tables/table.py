@@ -192,12 +192,10 @@ class Table:
         """(wi, wo) as :class:`~appearance_jax.core.vec.Vec3` arrays of shape (N,)."""
         import jax.numpy as jnp
 
-        from ...core.frame import spherical_direction
+        from ...core.frame import spherical_directions
 
         dt = dtype or jnp.result_type(float)
-        wi = spherical_direction(jnp.asarray(self.theta_i, dt), jnp.asarray(self.phi_i, dt))
-        wo = spherical_direction(jnp.asarray(self.theta_o, dt), jnp.asarray(self.phi_o, dt))
-        return wi, wo
+        return spherical_directions(*(np.asarray(a, dt) for a in (self.theta_i, self.phi_i, self.theta_o, self.phi_o)))
 
     def brdf_factor(self) -> np.ndarray:
         """(N, 1) factor that converts ``values`` (and ``sigma``) to a BRDF in 1/sr."""
