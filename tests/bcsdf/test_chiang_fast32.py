@@ -110,39 +110,46 @@ def _reference(p, wi, wo, h):
     return jnp.sum(A * (M * N)[..., None], axis=0) / cos_o[:, None]
 
 
-N_BIG = 2 * chiang._CHUNK + 37  # three steps, the last one overlapping
+N_BIG = 2 * chiang._CHUNK + 37  # odd: one group, three steps, the last one overlapping
+C_GROUP = chiang._CHUNK // chiang._GROUPS
+N_GROUPED = chiang._GROUPS * (2 * C_GROUP + 5)  # _GROUPS groups of three steps, the last overlapping
 
 
-def test_stepped_eval_matches_lobes():
+@pytest.mark.parametrize("n", [N_BIG, N_GROUPED])
+def test_stepped_eval_matches_lobes(n):
     with jax.enable_x64(True):
         p = chiang.Params.from_melanin(0.8, 0.2, beta_m=0.2, beta_n=0.35, alpha=0.06)
-        wi, wo = _pairs(N_BIG, 2)
+        wi, wo = _pairs(n, 2)
         h = chiang.offset_from_normal(wi)
         S = np.asarray(chiang.eval(p, wi, wo, h=h))
         ref = np.asarray(_reference(p, wi, wo, h))
-        assert S.shape == (N_BIG, 3)
+        assert S.shape == (n, 3)
         assert np.allclose(S, ref, rtol=1e-12, atol=1e-300)
         # the same pairs one step or less at a time (the unstepped path)
         part = [np.asarray(chiang.eval(p, Vec3(*(c[k:k + 5000] for c in wi)), Vec3(*(c[k:k + 5000] for c in wo)),
-                                       h=h[k:k + 5000])) for k in range(0, N_BIG, 5000)]
+                                       h=h[k:k + 5000])) for k in range(0, n, 5000)]
         assert np.allclose(np.concatenate(part), S, rtol=1e-13, atol=1e-300)
         # a 2D batch and a scalar h
-        S2 = np.asarray(chiang.eval(p, Vec3(*(c[:N_BIG - 37].reshape(2, -1) for c in wi)),
-                                    Vec3(*(c[:N_BIG - 37].reshape(2, -1) for c in wo)), h=0.3))
-        ref2 = np.asarray(_reference(p, Vec3(*(c[:N_BIG - 37] for c in wi)), Vec3(*(c[:N_BIG - 37] for c in wo)), 0.3))
+        k = n - n % 2
+        S2 = np.asarray(chiang.eval(p, Vec3(*(c[:k].reshape(2, -1) for c in wi)),
+                                    Vec3(*(c[:k].reshape(2, -1) for c in wo)), h=0.3))
+        ref2 = np.asarray(_reference(p, Vec3(*(c[:k] for c in wi)), Vec3(*(c[:k] for c in wo)), 0.3))
         assert np.allclose(S2.reshape(-1, 3), ref2, rtol=1e-12, atol=1e-300)
 
 
-def test_stepped_eval_per_pair_parameters():
+@pytest.mark.parametrize("n", [N_BIG, N_GROUPED])
+def test_stepped_eval_per_pair_parameters(n):
     with jax.enable_x64(True):
-        wi, wo = _pairs(N_BIG, 3)
+        wi, wo = _pairs(n, 3)
         rng = np.random.default_rng(4)
-        sig = rng.uniform(0, 3, (N_BIG, 3))
-        bm = rng.uniform(0.05, 0.8, N_BIG)
+        sig = rng.uniform(0, 3, (n, 3))
+        bm = rng.uniform(0.05, 0.8, n)
         p = chiang.Params(sigma_a=sig, beta_m=bm, beta_n=0.4, alpha=0.03)
         h = chiang.offset_from_normal(wi)
         S = np.asarray(chiang.eval.kernel(p, wi, wo, h))
-        idx = [0, 1, 8191, 8192, 16383, 16384, N_BIG - 1]
+        m, c = (n, chiang._CHUNK) if n % 2 else (n // chiang._GROUPS, C_GROUP)
+        # step and group edges (the last step of a group overlaps the one before)
+        idx = sorted({i for i in (0, 1, c - 1, c, 2 * c, m - c, m - 1, m, m + c, n - 1) if i < n})
         for i in idx:
             q = chiang.Params(sigma_a=sig[i], beta_m=bm[i], beta_n=0.4, alpha=0.03)
             one = np.asarray(chiang.eval(q, Vec3(*(c[i] for c in wi)), Vec3(*(c[i] for c in wo)), h=float(h[i])))
@@ -151,8 +158,9 @@ def test_stepped_eval_per_pair_parameters():
 
 def test_stepped_eval_gradient():
     """d/d(params) of a sum over a stepped batch equals the sum of the unstepped pieces'."""
+    n = N_GROUPED
     with jax.enable_x64(True):
-        wi, wo = _pairs(N_BIG, 5)
+        wi, wo = _pairs(n, 5)
         h = chiang.offset_from_normal(wi)
         p = chiang.Params.from_melanin(1.0, 0.1, beta_m=0.25, beta_n=0.3)
 
@@ -161,7 +169,7 @@ def test_stepped_eval_gradient():
 
         g = jax.grad(loss)(p, wi, wo, h)
         parts = [jax.grad(loss)(p, Vec3(*(c[k:k + 6000] for c in wi)), Vec3(*(c[k:k + 6000] for c in wo)),
-                                h[k:k + 6000]) for k in range(0, N_BIG, 6000)]
+                                h[k:k + 6000]) for k in range(0, n, 6000)]
         for name in ("eta", "sigma_a", "beta_m", "beta_n", "alpha"):
             ref = sum(np.asarray(getattr(q, name)) for q in parts)
             assert np.allclose(np.asarray(getattr(g, name)), ref, rtol=1e-10), name
@@ -169,7 +177,7 @@ def test_stepped_eval_gradient():
         gd = jax.grad(loss, argnums=(1, 2, 3))(p, wi, wo, h)
         parts = [jax.grad(loss, argnums=(1, 2, 3))(p, Vec3(*(c[k:k + 6000] for c in wi)),
                                                    Vec3(*(c[k:k + 6000] for c in wo)), h[k:k + 6000])
-                 for k in range(0, N_BIG, 6000)]
+                 for k in range(0, n, 6000)]
         for a, b in zip(jax.tree.leaves(gd), (np.concatenate(x) for x in zip(*(jax.tree.leaves(q) for q in parts)))):
             # 1e-7: a few pairs whose derivative cancels differ at ~1e-9 between the two programs
             assert np.allclose(np.asarray(a), b, rtol=1e-7, atol=1e-300)

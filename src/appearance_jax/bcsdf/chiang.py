@@ -317,9 +317,10 @@ def _eval(p: Params, wi: Vec3, wo: Vec3, h=0.0):
     return _finite(jnp.where(ok, f / jnp.where(ok, cos_o[..., None], 1.0), 0.0))
 
 
-# pairs per step of the near-field eval loop: the intermediates of one step stay in cache
-# (measured on a 2-core EPYC: 8192-32768 alike, 4096 slower)
-_CHUNK = 8192
+# pairs per step of the near-field eval loop: the ~30 intermediates of one step (256 kB each in
+# float32) stay in cache, and a 1e6-pair batch takes 16 steps of ~25 XLA kernels each (measured
+# on a 2-core EPYC, interleaved runs: 65536 best; 131072 and 32768 1.0-1.2x, 8192 1.2-1.5x slower)
+_CHUNK = 65536
 _GROUPS = 16  # see _eval_near
 
 
@@ -355,7 +356,7 @@ def _eval_near(p: Params, wi: Vec3, wo: Vec3, h):
     axis of 3 keeps the per-band loops from vectorising, and XLA fuses the whole per-pair
     computation into them (3x the work); every intermediate of a 1e6-pair batch is a fresh
     4 MB buffer whose page faults cost about as much as the arithmetic (the 40-odd
-    intermediates of this kernel: ~half its time). In steps of 8192 pairs they stay in cache.
+    intermediates of this kernel: ~half its time). In steps of _CHUNK pairs they stay in cache.
     Bands-major blocks gathered by one transpose at the end cost a further 12 MB copy."""
     sig = as_bands(p.sigma_a)
     nb = sig.shape[-1]
