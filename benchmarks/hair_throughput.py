@@ -18,9 +18,9 @@ asserts a time.
 
 from __future__ import annotations
 
-import numpy as np
 import time
 
+import numpy as np
 from _common import best_times, mitsuba_llvm, sharded_vec3, throughput_args
 
 BETA_M, BETA_N, ALPHA_DEG, EU = 0.3, 0.3, 2.0, 1.3
