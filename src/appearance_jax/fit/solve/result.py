@@ -23,6 +23,7 @@ import jax
 import numpy as np
 
 from ..tables.table import Table
+from . import reuse
 from . import uncertainty as unc
 from .problem import Problem
 from .residuals import FLOOR, error_metrics, residual, residual_scale
@@ -270,15 +271,21 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     """
     data = problem.data if data is None else data
     sp = problem.space
-    # jitted: op by op the transforms take a dozen small XLA programs (slices, sin, clip, ...)
-    x = jax.jit(sp.x_from_z)(np.asarray(z))
+    # jitted (op by op the transforms take a dozen small XLA programs: slices, sin, clip, ...),
+    # and kept for later fits of the same problem (:mod:`~.reuse`)
+    pkey = reuse.problem_key(problem)
+    z = np.asarray(z)
+    x = reuse.cached("x_from_z", pkey, lambda: jax.jit(sp.x_from_z), z)[0](z)
     bad = [lab for lab, v in zip(sp.labels, np.asarray(x, np.float64)) if not np.isfinite(v)]
     if bad:  # a Params cannot hold them (it would raise naming a field as if the user had set it)
         raise FitDiverged(f"the solver diverged after {int(steps)} steps: non-finite {', '.join(bad)} "
                           "(the residuals became NaN or inf); try other starts (n_starts / --starts), "
                           "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
-    out = jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl))(x, data, np.asarray(cl))
+    cl = np.asarray(cl)
+    cov_fn, _ = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),
+                             lambda: jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl)), x, data, cl)
+    out = cov_fn(x, data, cl)
     out = {k: np.asarray(v) for k, v in out.items()}
     x = np.asarray(x, np.float64)
     method, raw, sigma = sigma_kinds(sp, x, out)
@@ -286,10 +293,11 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     exact = np.asarray(out["flat"], bool)
     cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
     bound, flat = flags(sp, x, raw, [out[method]], exact)
-    params = jax.jit(sp.params_from_x)(x)
+    params = reuse.cached("params_from_x", pkey, lambda: jax.jit(sp.params_from_x), x)[0](x)
     w = np.asarray(data["weight"]) > 0
     # jitted: op by op, a coated model's eval would compile dozens of small programs
-    fitted = np.asarray(jax.jit(problem.evaluate)(params, data), np.float64)
+    evaluate, _ = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate), params, data)
+    fitted = np.asarray(evaluate(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))
     m = int(w.sum())
     diag = lambda c: np.sqrt(np.abs(np.diag(np.asarray(c, np.float64))))  # noqa: E731

@@ -38,6 +38,7 @@ from ...core import compile_cache
 from ..tables.table import Table
 from .problem import Problem, build_problem, start_params
 from . import uncertainty as unc
+from . import reuse
 from .lm import levenberg_marquardt
 from .result import FitResult, finish
 
@@ -189,8 +190,14 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         return jax.lax.map(lambda z: solve_z(problem, z, data, solver=solver, rtol=rtol, atol=atol,
                                              max_steps=max_steps, verbose=verbose), z0s)
 
+    # the compiled solve is kept for later fits of the same problem and shapes (:mod:`~.reuse`)
+    pkey = reuse.problem_key(problem)
+    n_valid = int((np.asarray(problem.data["weight"]) > 0).sum()) if verbose else None  # printed loss scale
+    # solve_z itself too: a replaced solver function (a test's monkeypatch) must not get the old program
+    skey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, verbose, n_valid)
     t0 = time.perf_counter()
-    compiled = jax.jit(run).lower(z0, problem.data).compile()
+    compiled, _ = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data).compile(),
+                               z0, problem.data)
     t1 = time.perf_counter()
     z, loss, steps, ok = jax.block_until_ready(compiled(z0, problem.data))
     wall = time.perf_counter() - t1
@@ -254,7 +261,11 @@ def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None
         return jax.vmap(lambda z, f, w: jax.lax.map(lambda m: one(z, f, w * m), mult,
                                                     batch_size=min(batch_size, n_boot)))(zs, fs, ws)
 
-    xs, ok = jax.jit(run)(jnp.asarray(zs, dt), jnp.asarray(fs, dt), jnp.asarray(ws, dt), mult, data)
+    args = (jnp.asarray(zs, dt), jnp.asarray(fs, dt), jnp.asarray(ws, dt), mult, data)
+    pkey = reuse.problem_key(problem)
+    bkey = None if pkey is None else (pkey, solve_z, n_boot, batch_size, tuple(sorted(solve_kw.items())))
+    run_jit, _ = reuse.cached("bootstrap", bkey, lambda: jax.jit(run), *args)
+    xs, ok = run_jit(*args)
     return np.asarray(xs, np.float64), np.asarray(ok)
 
 

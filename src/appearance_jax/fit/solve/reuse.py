@@ -1,0 +1,98 @@
+"""Compiled fit programs kept in memory and reused by later fits in the same process.
+
+A fit traces and compiles its solve, the covariances at the optimum and the model's fitted
+values. Across calls of :func:`~appearance_jax.fit.solve.fit` with the same model, free and
+fixed parameters, metric, solver settings and array shapes, those programs are the same: only
+their array arguments (the table's directions, data, weights and masks, the starts) differ. This
+module keeps them, keyed by everything the traced code depends on besides those arguments, so
+that a re-run, or a fit of another table of the same shape, skips tracing and compiling (the
+persistent cache of :mod:`appearance_jax.core.compile_cache` saves only the compiling, and only
+across processes).
+
+The key (:func:`problem_key`) holds the model object itself (kept alive while cached), the
+``Params`` template with its fixed values (leaf bytes) and static settings (tree structure),
+the free fields with their bounds, the metric and its floor, whether sigma is absolute (the
+covariances' scale), the PRNG key bytes of a stochastic
+model and its keyword arguments. A problem with anything unhashable in them is not cached.
+The shapes and dtypes of the arguments and the x64 setting are part of every entry's key.
+"""
+
+from __future__ import annotations
+
+import collections
+
+import jax
+import numpy as np
+
+__all__ = ["problem_key", "cached", "clear", "MAX_ENTRIES"]
+
+MAX_ENTRIES = 64  # least recently used programs beyond this are dropped
+_CACHE: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
+
+
+class _Same:
+    """Hashed and compared by identity (a Model holds dicts: it has no value hash); holding it
+    keeps the object, and so its id, alive while the entry is kept."""
+
+    __slots__ = ("obj",)
+
+    def __init__(self, obj):
+        self.obj = obj
+
+    def __hash__(self):
+        return id(self.obj)
+
+    def __eq__(self, other):
+        return isinstance(other, _Same) and other.obj is self.obj
+
+
+def _leaf_key(x):
+    a = np.asarray(x)
+    return (a.dtype.str, a.shape, a.tobytes())
+
+
+def problem_key(problem) -> tuple | None:
+    """What a :class:`~.problem.Problem`'s traced programs depend on besides their array
+    arguments (module docstring), or None when some of it is not hashable."""
+    try:
+        leaves, treedef = jax.tree_util.tree_flatten(problem.space.template)
+        key = problem.key
+        if key is not None and jax.dtypes.issubdtype(getattr(key, "dtype", None), jax.dtypes.prng_key):
+            key = jax.random.key_data(key)
+        k = (_Same(problem.model), treedef, tuple(_leaf_key(v) for v in leaves), problem.space.fields,
+             problem.metric, float(problem.floor), bool(problem.absolute_sigma),
+             None if key is None else _leaf_key(key),
+             tuple(sorted((n, v if not hasattr(v, "shape") else _leaf_key(v))
+                          for n, v in problem.model_kwargs.items())))
+        hash(k)
+        return k
+    except TypeError:  # an unhashable static value or keyword argument: do not reuse
+        return None
+
+
+def _avals(*args):
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    return treedef, tuple((np.shape(v), np.dtype(v.dtype if hasattr(v, "dtype") else type(v)).str) for v in leaves)
+
+
+def cached(tag, key, make, *args):
+    """The program ``make()`` (a jitted or compiled function of ``args``) for ``(tag, key)`` and
+    the shapes, dtypes and x64 setting of ``args``; built once and kept. ``key`` None: not kept.
+    Returns ``(function, hit)``."""
+    if key is None:
+        return make(), False
+    full = (tag, key, _avals(*args), bool(jax.config.jax_enable_x64))
+    fn = _CACHE.get(full)
+    if fn is not None:
+        _CACHE.move_to_end(full)
+        return fn, True
+    fn = make()
+    _CACHE[full] = fn
+    while len(_CACHE) > MAX_ENTRIES:
+        _CACHE.popitem(last=False)
+    return fn, False
+
+
+def clear() -> None:
+    """Forget every kept program (they are rebuilt on the next fit)."""
+    _CACHE.clear()

@@ -1,0 +1,84 @@
+"""fit.solve.reuse: compiled fit programs reused within a process.
+
+A reused program must give exactly what a fresh one gives (every result below is compared with a
+fit after ``reuse.clear()``), and anything the traced code depends on besides its array
+arguments must select another program: fixed values, metric, absolute vs relative sigma,
+solver settings, the model.
+"""
+
+import numpy as np
+import pytest
+
+from appearance_jax import registry
+from appearance_jax.fit.solve import fit, reuse
+from appearance_jax.fit.solve.problem import build_problem
+from appearance_jax.fit.tables.grids import in_plane_angles
+from appearance_jax.fit.tables.table import Table
+
+MODEL = registry.get("rough_conductor")
+
+
+def table(alpha, seed, sigma=True):
+    ti, to = in_plane_angles([0, 30, 60], np.arange(-80, 81, 10))
+    t = Table.in_plane(ti, to, np.ones((ti.size, 3)), source=f"synthetic alpha {alpha}")
+    wi, wo = t.directions()
+    f = np.asarray(MODEL.eval(MODEL.Params(alpha=alpha, specular_reflectance=(0.9, 0.8, 0.7)), wi, wo), np.float64)
+    f = f * (1 + 0.02 * np.random.default_rng(seed).standard_normal(f.shape))
+    return t.replace(values=f, sigma=0.02 * f if sigma else None, mask=np.ones(f.shape, bool))
+
+
+FIX = {"eta": None, "k": None}
+
+
+def run(t, **kw):
+    kw = {"fix": FIX, **kw}
+    return fit(MODEL, t, **kw)
+
+
+def fresh(t, **kw):
+    reuse.clear()
+    return run(t, **kw)
+
+
+def same(a, b):
+    np.testing.assert_array_equal(a.x, b.x)
+    np.testing.assert_array_equal(a.sigma, b.sigma)
+    np.testing.assert_array_equal(a.fitted, b.fitted)
+    assert a.loss == b.loss and a.iterations == b.iterations
+
+
+def test_second_fit_reuses_the_solve_and_equals_a_fresh_fit():
+    t = table(0.2, 0)
+    first = fresh(t)
+    again = run(t)
+    assert again.compile_time < 0.25 * max(first.compile_time, 1e-3)  # loaded, not compiled
+    same(again, first)
+
+
+def test_another_table_of_the_same_shape_reuses_and_equals_its_fresh_fit():
+    a, b = table(0.2, 0), table(0.35, 1)
+    run(a)
+    reused = run(b)
+    assert reused.compile_time < 0.05
+    same(reused, fresh(b))
+    assert abs(reused.x[0] - 0.35) < 0.05  # and it is b's fit, not a's
+
+
+@pytest.mark.parametrize("change", [dict(fix={"eta": 1.3, "k": None}), dict(metric="cos_log"),
+                                    dict(max_steps=3), dict(use_sigma=False)])
+def test_what_the_trace_depends_on_selects_another_program(change):
+    t = table(0.2, 0)
+    base = fresh(t)
+    changed = run(t, **change)
+    same(changed, fresh(t, **change))
+    assert not (changed.loss == base.loss and np.array_equal(changed.sigma, base.sigma))
+
+
+def test_problem_key_covers_fixed_values_and_sigma_kind():
+    t = table(0.2, 0)
+    k = lambda **kw: reuse.problem_key(build_problem(MODEL, t, **kw))  # noqa: E731
+    assert k(fix=FIX) == k(fix=FIX)
+    assert k(fix=FIX) != k(fix={"eta": 1.3, "k": None})
+    assert k(fix=FIX) != k(fix=FIX, use_sigma=False)
+    assert k(fix=FIX) != k(fix=FIX, metric="relative")
+    assert reuse.problem_key(build_problem(MODEL, t, fix=FIX, model_kwargs={"x": [1]})) is None  # unhashable
