@@ -167,17 +167,21 @@ def test_stepped_eval_gradient():
         def loss(q, a, b, hh):
             return jnp.sum(jnp.log1p(chiang.eval.kernel(q, a, b, hh)))
 
-        g = jax.grad(loss)(p, wi, wo, h)
-        parts = [jax.grad(loss)(p, Vec3(*(c[k:k + 6000] for c in wi)), Vec3(*(c[k:k + 6000] for c in wo)),
-                                h[k:k + 6000]) for k in range(0, n, 6000)]
+        # jitted (op by op the stepped loop's gradient took a minute); equal parts below one step:
+        # one compiled program for all of them
+        m = n // chiang._GROUPS
+        assert m * chiang._GROUPS == n and m < chiang._CHUNK
+        grad_p, grad_d = jax.jit(jax.grad(loss)), jax.jit(jax.grad(loss, argnums=(1, 2, 3)))
+        g = grad_p(p, wi, wo, h)
+        parts = [grad_p(p, Vec3(*(c[k:k + m] for c in wi)), Vec3(*(c[k:k + m] for c in wo)), h[k:k + m])
+                 for k in range(0, n, m)]
         for name in ("eta", "sigma_a", "beta_m", "beta_n", "alpha"):
             ref = sum(np.asarray(getattr(q, name)) for q in parts)
             assert np.allclose(np.asarray(getattr(g, name)), ref, rtol=1e-10), name
         # and with respect to the directions and h (per pair)
-        gd = jax.grad(loss, argnums=(1, 2, 3))(p, wi, wo, h)
-        parts = [jax.grad(loss, argnums=(1, 2, 3))(p, Vec3(*(c[k:k + 6000] for c in wi)),
-                                                   Vec3(*(c[k:k + 6000] for c in wo)), h[k:k + 6000])
-                 for k in range(0, n, 6000)]
+        gd = grad_d(p, wi, wo, h)
+        parts = [grad_d(p, Vec3(*(c[k:k + m] for c in wi)), Vec3(*(c[k:k + m] for c in wo)), h[k:k + m])
+                 for k in range(0, n, m)]
         for a, b in zip(jax.tree.leaves(gd), (np.concatenate(x) for x in zip(*(jax.tree.leaves(q) for q in parts)))):
             # 1e-7: a few pairs whose derivative cancels differ at ~1e-9 between the two programs
             assert np.allclose(np.asarray(a), b, rtol=1e-7, atol=1e-300)
