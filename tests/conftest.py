@@ -24,6 +24,7 @@ if "APPEARANCE_JAX_COMPILE_CACHE" not in os.environ:
     os.environ["APPEARANCE_JAX_COMPILE_CACHE"] = _RUN_CACHE
 
 from appearance_jax.core import compile_cache  # noqa: E402
+from appearance_jax.fit.solve import reuse  # noqa: E402
 
 compile_cache.ensure()
 # only programs that take a while: the suite compiles thousands of small ones, rarely twice
@@ -55,4 +56,5 @@ def _bound_compiled_executables():
     yield
     if _mapping_count() > MAX_MAPPINGS:
         jax.clear_caches()
+        reuse.clear()  # the fitters' kept programs (fit.solve.reuse) hold executables too
         gc.collect()
