@@ -82,3 +82,20 @@ def test_problem_key_covers_fixed_values_and_sigma_kind():
     assert k(fix=FIX) != k(fix=FIX, use_sigma=False)
     assert k(fix=FIX) != k(fix=FIX, metric="relative")
     assert reuse.problem_key(build_problem(MODEL, t, fix=FIX, model_kwargs={"x": [1]})) is None  # unhashable
+
+
+def test_fit_batch_reuses_its_program_and_equals_a_fresh_batch():
+    from appearance_jax.fit.solve import fit_batch
+
+    t = table(0.2, 0)
+    values = np.stack([table(0.2, 0).values, table(0.3, 1).values])
+    other = np.stack([table(0.25, 2).values, table(0.15, 3).values])
+    reuse.clear()
+    fit_batch(MODEL, t, values, fix=FIX)
+    again = fit_batch(MODEL, t, other, fix=FIX)
+    assert again.compile_time < 0.05
+    reuse.clear()
+    ref = fit_batch(MODEL, t, other, fix=FIX)
+    for name in ("x", "sigma", "loss", "iterations"):
+        np.testing.assert_array_equal(getattr(again, name), getattr(ref, name))
+    assert abs(again.x[0, 0] - 0.25) < 0.05 and abs(again.x[1, 0] - 0.15) < 0.05  # the new tables' fits

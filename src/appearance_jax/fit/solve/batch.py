@@ -30,6 +30,7 @@ import numpy as np
 from ...core import compile_cache
 from ..tables.table import Table
 from .problem import build_problem, entry_arrays
+from . import reuse
 from . import uncertainty as unc
 from .result import FitResult, finish, flags, sigma_kinds
 from .solvers import SOLVERS, bootstrap_refits, solve_z
@@ -171,8 +172,13 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
         batched, shared = NamedSharding(mesh, P("batch")), NamedSharding(mesh, P())
         z0 = jax.device_put(z0, batched)
         data = {n: jax.device_put(v, batched if n in per_item else shared) for n, v in data.items()}
+    # kept for later batches of the same problem, shapes and devices (:mod:`~.reuse`); ``run`` also
+    # captures the incidence clusters (from the directions) and the solver settings
+    pkey = reuse.problem_key(problem)
+    bkey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, int(n_cl),
+                                      np.asarray(cl).tobytes(), tuple(d.id for d in devs))
     t0 = time.perf_counter()
-    compiled = jax.jit(run).lower(z0, data).compile()
+    compiled, _ = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)
     t1 = time.perf_counter()
     z, x, out, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1
