@@ -14,7 +14,8 @@ The key (:func:`problem_key`) holds the model object itself (kept alive while ca
 the free fields with their bounds, the metric and its floor, whether sigma is absolute (the
 covariances' scale), the PRNG key bytes of a stochastic
 model and its keyword arguments. A problem with anything unhashable in them is not cached.
-The shapes and dtypes of the arguments and the x64 setting are part of every entry's key.
+The shapes and dtypes of the arguments, the x64 setting, the default device and backend and the
+matmul precision are part of every entry's key.
 """
 
 from __future__ import annotations
@@ -81,7 +82,9 @@ def cached(tag, key, make, *args):
     Returns ``(function, hit)``."""
     if key is None:
         return make(), False
-    full = (tag, key, _avals(*args), bool(jax.config.jax_enable_x64))
+    # the settings a trace and its executable depend on beyond the key: precision and the device
+    full = (tag, key, _avals(*args), bool(jax.config.jax_enable_x64), str(jax.config.jax_default_device),
+            str(jax.config.jax_default_matmul_precision), jax.default_backend())
     fn = _CACHE.get(full)
     if fn is not None:
         _CACHE.move_to_end(full)
