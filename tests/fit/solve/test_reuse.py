@@ -50,16 +50,19 @@ def same(a, b):
 def test_second_fit_reuses_the_solve_and_equals_a_fresh_fit():
     t = table(0.2, 0)
     first = fresh(t)
+    kept = len(reuse._CACHE)
     again = run(t)
-    assert again.compile_time < 0.25 * max(first.compile_time, 1e-3)  # loaded, not compiled
+    assert kept > 0 and len(reuse._CACHE) == kept  # every program taken from the cache, none built
     same(again, first)
 
 
 def test_another_table_of_the_same_shape_reuses_and_equals_its_fresh_fit():
     a, b = table(0.2, 0), table(0.35, 1)
+    reuse.clear()
     run(a)
+    kept = len(reuse._CACHE)
     reused = run(b)
-    assert reused.compile_time < 0.05
+    assert len(reuse._CACHE) == kept  # b's fit built no program
     same(reused, fresh(b))
     assert abs(reused.x[0] - 0.35) < 0.05  # and it is b's fit, not a's
 
@@ -92,8 +95,9 @@ def test_fit_batch_reuses_its_program_and_equals_a_fresh_batch():
     other = np.stack([table(0.25, 2).values, table(0.15, 3).values])
     reuse.clear()
     fit_batch(MODEL, t, values, fix=FIX)
+    kept = len(reuse._CACHE)
     again = fit_batch(MODEL, t, other, fix=FIX)
-    assert again.compile_time < 0.05
+    assert kept > 0 and len(reuse._CACHE) == kept  # the second batch built no program
     reuse.clear()
     ref = fit_batch(MODEL, t, other, fix=FIX)
     for name in ("x", "sigma", "loss", "iterations"):

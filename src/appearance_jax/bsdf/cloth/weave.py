@@ -28,8 +28,8 @@ P(t, w) = max(cos psi, 0), psi = atan2(w.t, w.n) the angle between n and w proje
 (t, n) plane (projected length of the tangent sample). Both are symmetric in (w_i, w_r).
 
 **Weave builders** (continuous arguments in degrees / relative lengths; numpy arrays for
-concrete arguments, jnp arrays when an argument is traced, so a fitter may differentiate through them): :func:`plain` (a ramp: Linen), :func:`crossing` (two flat
-sections joined by a ramp: Silk crepe flat threads, Silk Shot), :func:`satin` (flat sections at
+concrete arguments, jnp arrays when an argument is traced, so a fitter may differentiate through
+them): :func:`plain` (a ramp: Linen), :func:`crossing` (two flat sections joined by a ramp: Silk crepe flat threads, Silk Shot), :func:`satin` (flat sections at
 -alpha, 0, +alpha with an optional knee: Polyester front flat threads), :func:`join` (disjoint
 sub-curves: Polyester back) and :func:`twill`.
 

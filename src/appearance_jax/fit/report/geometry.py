@@ -14,13 +14,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+import jax
 import numpy as np
 
+from ...core.frame import in_plane_directions
 from ...core.model import estimate_of
 from ..tables.table import Table
 
 __all__ = ["eval_in_plane", "PlanePoints", "plane_points", "reciprocity_fill", "cell_edges", "grid_image",
            "raster_images"]
+
+
+# one compiled program per shape (op by op the two directions take six small ones)
+_in_plane_directions = jax.jit(in_plane_directions)
 
 
 def eval_in_plane(model, params, theta_i, theta_o, n_bands: int | None = None) -> np.ndarray:
@@ -32,12 +38,7 @@ def eval_in_plane(model, params, theta_i, theta_o, n_bands: int | None = None) -
             < 0 the retro side), as :func:`~appearance_jax.core.frame.in_plane_directions` takes them.
         n_bands: broadcast the bands axis to this many bands (a grey model on a colour table).
     """
-    import jax
-
-    from ...core.frame import in_plane_directions
-
-    # one compiled program (op by op the directions take six small ones)
-    wi, wo = jax.jit(in_plane_directions)(np.asarray(theta_i), np.asarray(theta_o))
+    wi, wo = _in_plane_directions(np.asarray(theta_i), np.asarray(theta_o))
     out = np.asarray(estimate_of(model.eval(params, wi, wo)))
     if out.ndim == 1:
         out = out[:, None]

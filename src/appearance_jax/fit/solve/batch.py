@@ -178,7 +178,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     bkey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, int(n_cl),
                                       np.asarray(cl).tobytes(), tuple(d.id for d in devs))
     t0 = time.perf_counter()
-    compiled, _ = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)
+    compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)
     t1 = time.perf_counter()
     z, x, out, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1

@@ -275,7 +275,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     # and kept for later fits of the same problem (:mod:`~.reuse`)
     pkey = reuse.problem_key(problem)
     z = np.asarray(z)
-    x = reuse.cached("x_from_z", pkey, lambda: jax.jit(sp.x_from_z), z)[0](z)
+    x = reuse.cached("x_from_z", pkey, lambda: jax.jit(sp.x_from_z), z)(z)
     bad = [lab for lab, v in zip(sp.labels, np.asarray(x, np.float64)) if not np.isfinite(v)]
     if bad:  # a Params cannot hold them (it would raise naming a field as if the user had set it)
         raise FitDiverged(f"the solver diverged after {int(steps)} steps: non-finite {', '.join(bad)} "
@@ -283,8 +283,8 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
                           "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
     cl = np.asarray(cl)
-    cov_fn, _ = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),
-                             lambda: jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl)), x, data, cl)
+    cov_fn = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),
+                           lambda: jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl)), x, data, cl)
     out = cov_fn(x, data, cl)
     out = {k: np.asarray(v) for k, v in out.items()}
     x = np.asarray(x, np.float64)
@@ -293,10 +293,10 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     exact = np.asarray(out["flat"], bool)
     cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
     bound, flat = flags(sp, x, raw, [out[method]], exact)
-    params = reuse.cached("params_from_x", pkey, lambda: jax.jit(sp.params_from_x), x)[0](x)
+    params = reuse.cached("params_from_x", pkey, lambda: jax.jit(sp.params_from_x), x)(x)
     w = np.asarray(data["weight"]) > 0
     # jitted: op by op, a coated model's eval would compile dozens of small programs
-    evaluate, _ = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate), params, data)
+    evaluate = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate), params, data)
     fitted = np.asarray(evaluate(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))
     m = int(w.sum())

@@ -77,23 +77,23 @@ def _avals(*args):
 
 
 def cached(tag, key, make, *args):
-    """The program ``make()`` (a jitted or compiled function of ``args``) for ``(tag, key)`` and
-    the shapes, dtypes and x64 setting of ``args``; built once and kept. ``key`` None: not kept.
-    Returns ``(function, hit)``."""
+    """The program ``make()`` (a jitted or compiled function of ``args``) for ``(tag, key)``, the
+    shapes and dtypes of ``args`` and the settings below; built once and kept. ``key`` None: not
+    kept."""
     if key is None:
-        return make(), False
+        return make()
     # the settings a trace and its executable depend on beyond the key: precision and the device
     full = (tag, key, _avals(*args), bool(jax.config.jax_enable_x64), str(jax.config.jax_default_device),
             str(jax.config.jax_default_matmul_precision), jax.default_backend())
     fn = _CACHE.get(full)
     if fn is not None:
         _CACHE.move_to_end(full)
-        return fn, True
+        return fn
     fn = make()
     _CACHE[full] = fn
     while len(_CACHE) > MAX_ENTRIES:
         _CACHE.popitem(last=False)
-    return fn, False
+    return fn
 
 
 def clear() -> None:

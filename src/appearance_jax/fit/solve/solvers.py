@@ -196,8 +196,8 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     # solve_z itself too: a replaced solver function (a test's monkeypatch) must not get the old program
     skey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, verbose, n_valid)
     t0 = time.perf_counter()
-    compiled, _ = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data).compile(),
-                               z0, problem.data)
+    compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data).compile(),
+                            z0, problem.data)
     t1 = time.perf_counter()
     z, loss, steps, ok = jax.block_until_ready(compiled(z0, problem.data))
     wall = time.perf_counter() - t1
@@ -264,7 +264,7 @@ def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None
     args = (jnp.asarray(zs, dt), jnp.asarray(fs, dt), jnp.asarray(ws, dt), mult, data)
     pkey = reuse.problem_key(problem)
     bkey = None if pkey is None else (pkey, solve_z, n_boot, batch_size, tuple(sorted(solve_kw.items())))
-    run_jit, _ = reuse.cached("bootstrap", bkey, lambda: jax.jit(run), *args)
+    run_jit = reuse.cached("bootstrap", bkey, lambda: jax.jit(run), *args)
     xs, ok = run_jit(*args)
     return np.asarray(xs, np.float64), np.asarray(ok)
 
