@@ -166,9 +166,10 @@ def longitudinal_lobe(theta_i, theta_o, v):
 def azimuthal_lobe(dphi, s):
     """Trimmed logistic on [-pi, pi] of scale s, of the wrapped offset ``dphi`` (Chiang Eq. 12);
     int N dphi = 1 over one period."""
-    x = jnp.abs(fiber.wrap_pi(dphi))
-    e = jnp.exp(-x / s)
-    return e / (s * (1.0 + e) ** 2) / jnp.tanh(jnp.pi / (2.0 * s))
+    # 1/s and the normalisation are per-lobe scalars: no division per element
+    inv_s, norm = 1.0 / s, 1.0 / (s * jnp.tanh(jnp.pi / (2.0 * s)))
+    e = jnp.exp(-jnp.abs(fiber.wrap_pi(dphi)) * inv_s)
+    return e / (1.0 + e) ** 2 * norm
 
 
 def _sample_trimmed_logistic(u, s):
@@ -248,11 +249,7 @@ def _n_lobes(p: Params, dphi, h, eta_p):
     three times."""
     s = azimuthal_scale(p.beta_n)
     g_i, g_t = _store((fast32.asin(h), fast32.asin(h / eta_p)))
-    norm, inv_s = 1.0 / (s * jnp.tanh(jnp.pi / (2.0 * s))), 1.0 / s
-    N = []
-    for j in range(P_MAX):  # the trimmed logistic (azimuthal_lobe) about Phi(j, h) (fiber.exit_azimuth)
-        e = jnp.exp(-jnp.abs(fiber.wrap_pi(dphi - (2.0 * j * g_t - 2.0 * g_i + j * jnp.pi))) * inv_s)
-        N.append(e / (1.0 + e) ** 2 * norm)
+    N = [azimuthal_lobe(dphi - fiber.exit_azimuth_of(j, g_i, g_t), s) for j in range(P_MAX)]
     N.append(jnp.full(jnp.shape(N[0]), 1.0 / (2.0 * jnp.pi), dtype=N[0].dtype))
     return N
 

@@ -179,9 +179,12 @@ def meso_frame(m: Vec3):
 def exit_azimuth(p, h, eta_prime):
     """Phi(p, h) = 2 p gamma_t - 2 gamma_i + p pi: the exit azimuth of lobe p relative to
     phi_i, for a smooth circular fiber (spec M18; unwrapped)."""
-    g_i = safe_asin(h)
-    g_t = safe_asin(h / eta_prime)
-    return 2.0 * p * g_t - 2.0 * g_i + p * jnp.pi
+    return exit_azimuth_of(p, safe_asin(h), safe_asin(h / eta_prime))
+
+
+def exit_azimuth_of(p, gamma_i, gamma_t):
+    """Phi(p, h) of :func:`exit_azimuth` from gamma_i = asin(h) and gamma_t = asin(h / eta')."""
+    return 2.0 * p * gamma_t - 2.0 * gamma_i + p * jnp.pi
 
 
 def smooth_attenuation(h, theta_i, eta, sigma_a, p_max: int = 4):
