@@ -1,0 +1,301 @@
+"""The drop fan tracer (flatland.drop, flatland.polar_curve) against closed forms and the
+independent flatland tracer (spec seed-002 §1.2.2, §1.2.5, §1.2.8; checks C11, C14–C16).
+
+- circle: deviations, optical paths and (⊥, ∥) amplitudes equal the §1.2.5 closed forms;
+  directions, paths, foci and |field| per lobe equal flatland.trace on a cylinder;
+- C11: 2-D energy fractions per family, and their sum over p < 30 is 1;
+- C14: Table 3.1 rows conserve the volume and give the Beard–Chuang axis ratios;
+- C15: extremal p = 2, 3 angles of the non-spherical meridian (self-derived regression
+  table of §1.2.8), columns swapped by the orientation;
+- C16: a sphere's fan does not depend on the sun's inclination, a flattened drop's does;
+- implicit gradients of hits and outgoing angles vs central finite differences; eager errors.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from appearance_jax import flatland as fl
+from appearance_jax.core.frame import fiber_direction
+from appearance_jax.core.vec import Vec3
+from appearance_jax.flatland import polar_curve as pc
+from appearance_jax.flatland.drop import impact_grid, trace_drop
+
+N_WATER = 1.331
+
+
+def closed_form(s, n, p):
+    """Spec §1.2.5 for a circle: psi (signed), L, A_perp, A_par."""
+    i = np.arcsin(np.abs(s))
+    r = np.arcsin(np.sin(i) / n)
+    D = 2 * (i - r) + (p - 1) * (np.pi - 2 * r)            # p = 0 gives 2i - pi
+    psi = np.angle(np.exp(-1j * np.sign(s) * D))
+    L = -2 * np.cos(i) + 2 * p * n * np.cos(r)
+    rs = (np.cos(i) - n * np.cos(r)) / (np.cos(i) + n * np.cos(r))
+    rp = (n * np.cos(i) - np.cos(r)) / (n * np.cos(i) + np.cos(r))
+    amp = [rho if p == 0 else (1 - rho ** 2) * (-rho) ** (p - 1) for rho in (rs, rp)]
+    return psi, L, amp[0], amp[1]
+
+
+def test_circle_equals_closed_forms():
+    s = np.concatenate([np.linspace(-0.999, -0.01, 40), np.linspace(0.013, 0.9995, 40)])
+    F = 6
+    f = trace_drop(pc.circle_curve(), N_WATER, s=s, families=F)
+    assert f.psi.shape == (F, s.size) and f.amp.shape == (F, s.size, 2)
+    assert bool(jnp.all(f.valid))
+    for p in range(F):
+        psi, L, a_s, a_p = closed_form(s, N_WATER, p)
+        np.testing.assert_allclose(np.angle(np.exp(1j * (np.asarray(f.psi[p]) - psi))), 0.0, atol=1e-10)
+        np.testing.assert_allclose(np.asarray(f.opl[p]), L, atol=1e-10)
+        np.testing.assert_allclose(np.asarray(f.amp[p, :, 0]), a_s, atol=1e-10)
+        np.testing.assert_allclose(np.asarray(f.amp[p, :, 1]), a_p, atol=1e-10)
+        # a circle's hits are the closed-form points: the axis count of a ray through the
+        # circle follows from the angles of the hit points (its sign changes)
+    # the orientation and the sun's inclination are irrelevant for a circle
+    g = trace_drop(pc.circle_curve("up"), N_WATER, s=s, families=F, inclination=0.7)
+    for a, b in zip(f, g):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-10)
+
+
+def test_circle_hits_equal_closed_form():
+    s = jnp.linspace(-0.9999, 0.9999, 101)
+    c = pc.circle_curve()
+    px, pz = -3.0 + 0 * s, s
+    t, hit = pc.hit_from_outside(c, px, pz, jnp.ones_like(s), jnp.zeros_like(s), 6.0)
+    assert bool(jnp.all(hit))
+    np.testing.assert_allclose(np.asarray(t), 3.0 - np.sqrt((1 - s) * (1 + s)), atol=1e-11)
+    t2, ok = pc.hit_from_inside(c, px + t, pz, jnp.ones_like(s), jnp.zeros_like(s), 2.2)
+    assert bool(jnp.all(ok))
+    np.testing.assert_allclose(np.asarray(t2), 2 * np.sqrt((1 - s) * (1 + s)), atol=1e-11)
+    miss, hit = pc.hit_from_outside(c, px, 1.0001 + 0 * s, jnp.ones_like(s), jnp.zeros_like(s), 6.0)
+    assert not bool(jnp.any(hit))
+
+
+def test_circle_equals_flatland_tracer():
+    """Independent check: flatland.trace on a cylinder at normal incidence. Its wi = (0, 1, 0)
+    propagates along -y in the (y, z) section and launches offset h at z = -h, so h = s."""
+    s = np.array([-0.97, -0.9, -0.7, -0.3, 0.1, 0.4, 0.8, 0.86, 0.95])
+    F = 5
+    f = trace_drop(pc.circle_curve(), N_WATER, s=s, families=F)
+    wi = fiber_direction(0.0, 0.0)
+    rec = fl.trace(fl.cylinder(N_WATER), wi, jnp.asarray(s), max_events=F, wave=True, polarized=True)
+    par = fl.trace(fl.cylinder(N_WATER), wi, jnp.asarray(s), max_events=F, polarized=True,
+                   field=Vec3(0.0, 0.0, 1.0 + 0j))    # in the section plane: parallel
+    dy, dz = -float(wi.y), -float(wi.z)
+    for p in range(F):
+        assert np.all(np.asarray(rec.lobe[p]) == p)
+        oy, oz = np.asarray(rec.direction.y[p]), np.asarray(rec.direction.z[p])
+        psi = np.arctan2(dy * oz - dz * oy, dy * oy + dz * oz)
+        np.testing.assert_allclose(np.asarray(f.psi[p]), psi, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(f.opl[p]), np.asarray(rec.opl[p]), atol=1e-12)
+        np.testing.assert_array_equal(np.asarray(f.foci[p]), np.asarray(rec.foci[p]))
+        np.testing.assert_allclose(np.abs(np.asarray(f.amp[p, :, 0])), np.abs(np.asarray(rec.field.x[p])),
+                                   atol=1e-12)
+        e_par = np.sqrt(sum(np.abs(np.asarray(c[p])) ** 2 for c in par.field))
+        np.testing.assert_allclose(np.abs(np.asarray(f.amp[p, :, 1])), e_par, atol=1e-12)
+
+
+def test_circle_axis_crossings_brute_force():
+    """N_ax: sign changes of the transverse coordinate along the polyline (plain numpy)."""
+    n = N_WATER
+    s = np.array([-0.95, -0.6, -0.2, 0.1, 0.5, 0.8, 0.9, 0.97])
+    F = 5
+    f = trace_drop(pc.circle_curve(), n, s=s, families=F)
+    for j, h in enumerate(s):
+        x = np.array([-np.sqrt(1 - h * h), h])
+        d = np.array([1.0, 0.0])
+        ci = -d @ x
+        ct = np.sqrt(1 - (1 - ci ** 2) / n ** 2)
+        d_in = d / n + (ci / n - ct) * x
+        d0 = d - 2 * (d @ x) * x
+        assert int(f.axis[0, j]) == int(x[1] * d0[1] < 0)
+        pts, d = [x.copy()], d_in
+        for p in range(1, F):
+            x = x - 2 * (x @ d) * d
+            pts.append(x.copy())
+            ci = d @ x
+            ct = np.sqrt(1 - n ** 2 * (1 - ci ** 2))
+            out = n * d + (ct - n * ci) * x
+            u = [q[1] for q in pts]
+            count = sum(int(a * b < 0) for a, b in zip(u[:-1], u[1:])) + int(u[-1] * out[1] < 0)
+            assert int(f.axis[p, j]) == count, (h, p)
+            d = d - 2 * (d @ x) * x
+
+
+def test_energy_fractions_c11():
+    """2-D circle, n = 1.331, unpolarised: 4.48 / 91.92 / 3.10 / 0.34 % for p = 0..3 (spec
+    table, rounded to 0.01 %), each equal to the quadrature of the closed form; sum over
+    p < 30 -> 1."""
+    N = 100_000
+    s = -1 + (np.arange(N) + 0.5) * 2 / N
+    f = trace_drop(pc.circle_curve(), N_WATER, s=s, families=30)
+    w = 0.5 * (np.abs(np.asarray(f.amp[..., 0])) ** 2 + np.abs(np.asarray(f.amp[..., 1])) ** 2)
+    E = w.sum(1) / N                                   # (1/2) int w ds over (-1, 1)
+    np.testing.assert_allclose(E[:4], [0.0448, 0.9192, 0.0310, 0.0034], atol=1e-4)
+    assert abs(E[:4].sum() - 0.9984) < 1e-4
+    for p in range(4):
+        _, _, a_s, a_p = closed_form(s, N_WATER, p)
+        np.testing.assert_allclose(E[p], np.mean(0.5 * (a_s ** 2 + a_p ** 2)), rtol=1e-12)
+    assert abs(E.sum() - 1.0) < 1e-5
+    assert np.all(np.diff(E[1:]) < 0)
+
+
+@pytest.mark.parametrize("row,ratio", [(1, 0.927), (2, 0.853), (3, 0.777), (4, 0.706), (5, 0.640)])
+def test_beard_chuang_rows_c14(row, ratio):
+    a = pc.BEARD_CHUANG_RADII_MM[row]
+    curve = pc.beard_chuang(a)
+    np.testing.assert_allclose(np.asarray(curve.c), pc.BEARD_CHUANG_TABLE[row], atol=0)
+    assert abs(float(pc.volume(curve)) / (4 * np.pi / 3) - 1) < 3e-4
+    lo, hi = pc.extent(curve, 1.0, 0.0)                 # horizontal width
+    bot, top = pc.extent(curve, 0.0, 1.0)               # vertical height
+    assert abs(float((top - bot) / (hi - lo)) - ratio) < 5e-4
+    # orientation "down": theta = 0, the smaller radius, at the bottom
+    assert float(-bot) < float(top)
+    assert float(pc.radius(curve, 0.0)) == pytest.approx(-float(bot), abs=1e-12)
+
+
+def test_beard_chuang_interpolation_and_domain():
+    np.testing.assert_allclose(np.asarray(pc.beard_chuang_coefficients(0.5)), pc.BEARD_CHUANG_TABLE[1] / 6,
+                               atol=1e-15)
+    np.testing.assert_allclose(np.asarray(pc.beard_chuang_coefficients(0.45)), pc.BEARD_CHUANG_TABLE[1] / 12,
+                               atol=1e-15)
+    assert np.all(np.asarray(pc.beard_chuang_coefficients(0.2)) == 0)
+    with pytest.warns(UserWarning, match="beyond Table 3.1"):
+        c = pc.beard_chuang_coefficients(3.5)
+    np.testing.assert_allclose(np.asarray(c), pc.BEARD_CHUANG_TABLE[-1])
+    # the coefficients are differentiable in the radius inside the table
+    d = jax.jacfwd(pc.beard_chuang_coefficients)(1.2)
+    np.testing.assert_allclose(np.asarray(d), (pc.BEARD_CHUANG_TABLE[2] - pc.BEARD_CHUANG_TABLE[1]) / 0.5,
+                               rtol=1e-12)
+
+
+# spec §1.2.8: primary top, primary bottom, secondary top, secondary bottom (deg)
+C15 = {0.4: (137.630, 137.630, 129.635, 129.635), 0.45: (138.031, 138.494, 128.715, 130.449),
+       0.5: (138.433, 139.379, 127.726, 131.253), 0.6: (139.241, 141.211, 125.522, 132.826),
+       0.8: (140.846, 145.166, 120.246, 135.776), 1.0: (142.385, 149.552, 114.097, 138.349)}
+
+
+def _extremum(s, ang, mask, largest):
+    """Extremum of ang(s) over the masked rays, refined by the parabola through the best three."""
+    a = np.where(mask, ang, -np.inf if largest else np.inf)
+    j = int(np.argmax(a) if largest else np.argmin(a))
+    c = np.polyfit(s[j - 1:j + 2] - s[j], ang[j - 1:j + 2], 2)
+    return np.polyval(c, -c[1] / (2 * c[0]))
+
+
+@pytest.mark.parametrize("orientation", ["down", "up"])
+def test_nonspherical_bow_angles_c15(orientation):
+    """Sun inclination 0: extremal p = 2 (minimum) and p = 3 (maximum) scattering angles of
+    rays leaving downwards (top of the bow) and upwards (bottom). Flipping the orientation
+    swaps the columns."""
+    for a, ref in C15.items():
+        curve = pc.beard_chuang(a, orientation)
+        s = np.asarray(impact_grid(curve, 20001))
+        f = trace_drop(curve, N_WATER, s=s, families=4)
+        psi, v = np.asarray(f.psi), np.asarray(f.valid)
+        got = [np.degrees(_extremum(s, np.abs(psi[p]), v[p] & (np.sign(psi[p]) == sgn), p == 3))
+               for p in (2, 3) for sgn in (-1, 1)]          # psi < 0: leaving downwards
+        want = np.array(ref)[[0, 1, 2, 3]] if orientation == "down" else np.array(ref)[[1, 0, 3, 2]]
+        np.testing.assert_allclose(got, want, atol=0.002, err_msg=f"a = {a} mm")
+
+
+def test_inclination_c16():
+    s = np.linspace(-0.9, 0.9, 300)                    # not s = 0: psi = +-pi there
+    sph = [trace_drop(pc.beard_chuang(0.4), N_WATER, s=s, inclination=a) for a in (0.0, 0.2, 0.6)]
+    for f in sph[1:]:
+        for x, y in zip(sph[0], f):
+            np.testing.assert_allclose(np.asarray(x), np.asarray(y), atol=1e-11)
+    for a_mm in (0.45, 1.0):
+        f0, f1 = (trace_drop(pc.beard_chuang(a_mm), N_WATER, s=s, inclination=a) for a in (0.0, 0.2))
+        assert np.max(np.abs(np.asarray(f0.psi[2] - f1.psi[2]))) > 1e-3
+
+
+def test_tir_exit_marks_family_invalid():
+    """A strongly deformed section (c_2 = -0.4: an elongated oval) traps some rays: where an
+    exit is beyond the critical angle that family is invalid and its power goes on."""
+    curve = pc.polar_curve([0.0, 0.0, 0.4])
+    s = np.linspace(-0.99, 0.99, 2001)
+    f = trace_drop(curve, 1.5, s=s, families=6, inclination=0.4)
+    v = np.asarray(f.valid)
+    assert v[0].all() and not v[1:].all()
+    assert np.all(np.asarray(f.amp)[~v] == 0)
+    w = 0.5 * (np.abs(np.asarray(f.amp[..., 0])) ** 2 + np.abs(np.asarray(f.amp[..., 1])) ** 2)
+    assert np.all(w.sum(0) <= 1 + 1e-12)
+
+
+def test_implicit_gradients_vs_finite_differences():
+    s = jnp.array([-0.62, -0.25, 0.31, 0.55, 0.7])
+
+    @jax.jit
+    def hits(c):
+        curve = pc.PolarCurve(c, jnp.asarray(-1.0))
+        px, pz = -2.5 + 0 * s, s
+        t, _ = pc.hit_from_outside(curve, px, pz, jnp.ones_like(s), jnp.zeros_like(s), 5.0)
+        x = px + t
+        nx, nz = pc.normal(curve, x, pz)
+        cb, sb = np.cos(0.4), np.sin(0.4)                  # a skew chord into the drop
+        t2, ok = pc.hit_from_inside(curve, x, pz, -(cb * nx - sb * nz), -(sb * nx + cb * nz), 2.5)
+        return jnp.concatenate([t, jnp.where(ok, t2, jnp.nan)])
+
+    c0 = jnp.asarray(pc.BEARD_CHUANG_TABLE[2])
+    J = jax.jacfwd(hits)(c0)
+    Jr = jax.jacrev(hits)(c0)
+    eps = 1e-6
+    fd = np.stack([(hits(c0.at[k].add(eps)) - hits(c0.at[k].add(-eps))) / (2 * eps) for k in range(8)], -1)
+    np.testing.assert_allclose(np.asarray(J), fd, atol=1e-7)
+    np.testing.assert_allclose(np.asarray(Jr), fd, atol=1e-7)
+
+    # the outgoing angles and optical paths in the drop radius (mm), eta and inclination
+    sf = jnp.array([-0.5, -0.2, 0.3, 0.6])
+
+    def fan_out(x):
+        f = trace_drop(pc.beard_chuang(x[0]), x[1], s=sf, inclination=x[2], families=4)
+        return jnp.concatenate([f.psi.ravel(), f.opl.ravel(), jnp.abs(f.amp).ravel()])
+
+    x0 = jnp.array([1.2, 1.331, 0.1])
+    J = jax.jacrev(fan_out)(x0)
+    fd = np.stack([(fan_out(x0.at[k].add(1e-6)) - fan_out(x0.at[k].add(-1e-6))) / 2e-6 for k in range(3)], -1)
+    np.testing.assert_allclose(np.asarray(J), fd, atol=1e-6)
+
+
+def test_eager_errors():
+    c = pc.circle_curve()
+    with pytest.raises(ValueError, match="radius_mm"):
+        pc.beard_chuang(0.0)
+    with pytest.raises(ValueError, match="radius_mm"):
+        pc.beard_chuang(-1.0)
+    with pytest.raises(ValueError, match="eta"):
+        trace_drop(c, 1.0, s=[0.1])
+    with pytest.raises(ValueError, match="families"):
+        trace_drop(c, 1.33, s=[0.1], families=0)
+    with pytest.raises(ValueError, match="extent"):
+        trace_drop(c, 1.33, s=[-1.0, 0.5])
+    with pytest.raises(ValueError, match="extent"):
+        trace_drop(c, 1.33, s=[0.5, 1.2])
+    with pytest.raises(ValueError, match="increasing"):
+        trace_drop(c, 1.33, s=[0.5, 0.1])
+    with pytest.raises(ValueError, match="orientation"):
+        pc.beard_chuang(1.0, "sideways")
+    with pytest.raises(ValueError, match="sum"):
+        pc.polar_curve([0.5, 0.6])
+    with pytest.raises(TypeError):
+        trace_drop(fl.cylinder(1.33), 1.33)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        pc.beard_chuang(3.0)                            # the last row: no warning
+
+
+def test_jit_and_vmap_over_wavelengths():
+    curve = pc.beard_chuang(0.5)
+    s = jnp.linspace(-0.9, 0.9, 64)
+    etas = jnp.array([1.331, 1.3445])
+    fans = jax.vmap(lambda e: trace_drop(curve, e, s=s))(etas)
+    one = trace_drop(curve, 1.3445, s=s)
+    np.testing.assert_allclose(np.asarray(fans.psi[1]), np.asarray(one.psi), atol=1e-13)
+    jf = jax.jit(lambda a: trace_drop(pc.beard_chuang(a), 1.331, s=s).opl)
+    np.testing.assert_allclose(np.asarray(jf(0.5)), np.asarray(trace_drop(curve, 1.331, s=s).opl), atol=1e-13)
