@@ -141,6 +141,11 @@ GRID: dict[str, list[Case]] = {
         Case("matte2", dict(preset="matte2"), lossless=True),
         Case("rgb_bands", dict(w_g=(0.3, 0.6, 0.9), g1=0.7, g2=(-0.6, -0.2, 0.1)), lossless=True),
     ],
+    # a phase function integrates to 1 whatever the absorption (soot), hence lossless everywhere
+    "mie": [
+        Case("haze_rgb", dict(preset="haze"), lossless=True),
+        Case("soot", dict(preset="soot"), lossless=True),
+    ],
 }
 
 _FINE = {"furnace": dict(n_theta=256, n_phi=512)}  # narrow lobes need a finer quadrature
@@ -217,6 +222,8 @@ SLOW_GRID: dict[str, list[Case]] = {
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]
     + [Case("opposed", dict(w_g=0.3, g1=0.95, g2=-0.95), lossless=True, opts=_PEAKED)],
+    "mie": [Case(name, dict(preset=name), lossless=True, opts=_PEAKED) for name in ("rayleigh", "fog")]
+    + [Case("glass_x20", dict(radius_um=2.0, wavelength_nm=600.0, n_particle=1.5), lossless=True, opts=_PEAKED)],
 }
 
 
