@@ -290,12 +290,59 @@ def test_eager_errors():
         pc.beard_chuang(3.0)                            # the last row: no warning
 
 
-def test_jit_and_vmap_over_wavelengths():
+def test_vmap_over_wavelengths():
     curve = pc.beard_chuang(0.5)
     s = jnp.linspace(-0.9, 0.9, 64)
     etas = jnp.array([1.331, 1.3445])
     fans = jax.vmap(lambda e: trace_drop(curve, e, s=s))(etas)
     one = trace_drop(curve, 1.3445, s=s)
     np.testing.assert_allclose(np.asarray(fans.psi[1]), np.asarray(one.psi), atol=1e-13)
-    jf = jax.jit(lambda a: trace_drop(pc.beard_chuang(a), 1.331, s=s).opl)
-    np.testing.assert_allclose(np.asarray(jf(0.5)), np.asarray(trace_drop(curve, 1.331, s=s).opl), atol=1e-13)
+
+
+def test_single_family():
+    s = np.linspace(-0.9, 0.9, 300)                    # the shape of test_inclination_c16
+    f1 = trace_drop(pc.beard_chuang(0.7), N_WATER, s=s, families=1)
+    f3 = trace_drop(pc.beard_chuang(0.7), N_WATER, s=s, families=4)
+    for a, b in zip(f1[1:], f3[1:]):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:1])
+
+
+def _cross(p0, d0, l0, p1, d1, l1):
+    M = np.array([[d0[0], -d1[0]], [d0[1], -d1[1]]])
+    if abs(np.linalg.det(M)) < 1e-300:
+        return False
+    a, b = np.linalg.solve(M, np.asarray(p1) - np.asarray(p0))
+    return 0 < a < l0 and 0 < b < l1
+
+
+def test_foci_of_a_flattened_drop_equal_neighbour_crossings():
+    """Foci from the forward-mode tangents (implicit hit derivatives) against the crossings of
+    each ray's polyline with that of a neighbour at s + ds, on a 1 mm Beard–Chuang drop."""
+    from appearance_jax.flatland.drop import _chain
+
+    curve, F, ds = pc.beard_chuang(1.0), 5, 1e-7
+    s = np.array([-0.83, -0.55, -0.2, 0.15, 0.42, 0.68, 0.79, 0.9])
+    f = trace_drop(curve, N_WATER, s=s, families=F, inclination=0.15)
+
+    def polylines(v):
+        en, ch = _chain(curve, jnp.asarray(N_WATER), jnp.asarray(0.15), jnp.asarray(v), F)
+        pts = np.stack([np.concatenate([np.asarray(en[a])[None], np.asarray(ch[b])]) for a, b in
+                        (("x", "qx"), ("z", "qz"))], -1)                    # (F, N, 2)
+        out = np.stack([np.concatenate([np.asarray(en[a])[None], np.asarray(ch[a])]) for a in ("ox", "oz")], -1)
+        return pts, out
+
+    A, dA = polylines(s)
+    B, dB = polylines(s + ds)
+    checked = 0
+    for j in range(s.size):
+        for p in range(F):
+            if not bool(f.valid[p, j]):
+                continue
+            count = 0
+            for k in range(p):
+                la, lb = np.linalg.norm(A[k + 1, j] - A[k, j]), np.linalg.norm(B[k + 1, j] - B[k, j])
+                count += _cross(A[k, j], (A[k + 1, j] - A[k, j]) / la, la, B[k, j], (B[k + 1, j] - B[k, j]) / lb, lb)
+            count += _cross(A[p, j], dA[p, j], 1e9, B[p, j], dB[p, j], 1e9)
+            assert int(f.foci[p, j]) == count, (s[j], p, int(f.foci[p, j]), count)
+            checked += 1
+    assert checked > 30

@@ -78,9 +78,10 @@ def _reflect(dx, dz, nx, nz):
 
 
 def _chain(curve, eta, alpha, s, F):
-    """The geometric and amplitude trace; geometry for the foci counts in ``geo``."""
+    """The geometry of the trace (hit points, directions, cosines), differentiated along s
+    for the foci counts; amplitudes and paths follow from it in :func:`_trace`."""
     dx0, dz0 = jnp.cos(alpha), -jnp.sin(alpha)
-    ux, uz = -dz0, dx0                                     # n_perp: s axis
+    ux, uz = -dz0, dx0                                     # n_perp: the s axis
     rb = sg(1.0 + jnp.sum(jnp.abs(curve.c)))               # bound on r / a
     px0, pz0 = s * ux - 1.5 * rb * dx0, s * uz - 1.5 * rb * dz0
     dxs, dzs = jnp.broadcast_to(dx0, s.shape), jnp.broadcast_to(dz0, s.shape)
@@ -88,37 +89,24 @@ def _chain(curve, eta, alpha, s, F):
     x1, z1 = px0 + t1 * dx0, pz0 + t1 * dz0
     nx, nz = pcv.normal(curve, x1, z1)
     ci = -(dx0 * nx + dz0 * nz)
-    one = jnp.ones((), s.dtype)
-    (r_s, r_p), (t_s, t_p), _ = _fresnel(ci, one, eta)
     ox, oz = _reflect(dxs, dzs, nx, nz)
-    opl_in = x1 * dx0 + z1 * dz0                           # centre plane -> entry point
-    amp0 = jnp.stack([r_s, r_p], -1)
-    opl0 = opl_in - (x1 * ox + z1 * oz)
     dx, dz, _ = _refract(dxs, dzs, nx, nz, ci, eta)
 
     def step(carry, _):
-        x, z, dx, dz, a_s, a_p, opl, ok_acc = carry
+        x, z, dx, dz = carry
         t, ok = pcv.hit_from_inside(curve, x, z, dx, dz, 2.2 * rb)
         qx, qz = x + t * dx, z + t * dz
         nx, nz = pcv.normal(curve, qx, qz)
         ci = dx * nx + dz * nz
-        (r_s, r_p), (t_s, t_p), tir = _fresnel(ci, eta, one)
         ex, ez, _ = _refract(dx, dz, -nx, -nz, ci, 1.0 / eta)
-        opl = opl + eta * t
-        ok_acc = ok_acc & ok
-        out = dict(amp=jnp.stack([a_s * t_s, a_p * t_p], -1), opl=opl - (qx * ex + qz * ez),
-                   valid=ok_acc & ~tir, ox=ex, oz=ez,
-                   geo=dict(px=x, pz=z, dx=dx, dz=dz, t=t, qx=qx, qz=qz))
         rx, rz = _reflect(dx, dz, nx, nz)
-        return (qx, qz, rx, rz, a_s * r_s, a_p * r_p, opl, ok_acc), out
+        return (qx, qz, rx, rz), dict(px=x, pz=z, dx=dx, dz=dz, t=t, ok=ok, qx=qx, qz=qz, ci=ci, ox=ex, oz=ez)
 
-    init = (x1, z1, dx, dz, t_s + 0j, t_p + 0j, opl_in, hit)
-    _, outs = jax.lax.scan(step, init, None, length=F - 1)
-    cat = lambda a, b: jnp.concatenate([a[None], b], 0)
-    res = dict(amp=cat(amp0, outs["amp"]), opl=cat(opl0, outs["opl"]), valid=cat(hit, outs["valid"]),
-               ox=cat(ox, outs["ox"]), oz=cat(oz, outs["oz"]))
-    geo = dict(x1=x1, z1=z1, **outs["geo"])
-    return res, geo
+    # (F = 1 still runs one step, sliced off: a zero-length scan has no body to trace)
+    _, chords = jax.lax.scan(step, (x1, z1, dx, dz), None, length=max(F - 1, 1))
+    chords = jax.tree_util.tree_map(lambda a: a[:F - 1], chords)
+    entry = dict(x=x1, z=z1, ci=ci, ox=ox, oz=oz, hit=hit)
+    return entry, chords
 
 
 @partial(jax.jit, static_argnames=("F",))
@@ -129,33 +117,40 @@ def _trace(curve, eta, alpha, s, F):
     lo, hi = pcv.extent(sg(curve), sg(ux), sg(uz))
     hit_s = (s > lo) & (s < hi)
     s_eff = jnp.where(hit_s, s, 0.5 * (lo + hi))            # missed rays: a safe stand-in
-    (res, geo), (tres, tgeo) = jax.jvp(lambda v: _chain(curve, eta, alpha, v, F), (s_eff,),
-                                    (jnp.ones_like(s_eff),))
-    fp = lambda px, pz, dx, dz: dict(py=px, pz=pz, dy=dx, dz=dz)
-    # foci on chords 1 .. F-1 (cumulative), then on each family's outgoing half-line
-    if F > 1:
-        chord = _crossing(fp(geo["px"], geo["pz"], geo["dx"], geo["dz"]),
-                          fp(tgeo["px"], tgeo["pz"], tgeo["dx"], tgeo["dz"]), geo["t"], True)
-        chord = jnp.concatenate([jnp.zeros((1,) + s.shape, jnp.int32), jnp.cumsum(chord, 0)], 0)
-        ex = jnp.concatenate([geo["x1"][None], geo["qx"]], 0)
-        ez = jnp.concatenate([geo["z1"][None], geo["qz"]], 0)
-        tex = jnp.concatenate([tgeo["x1"][None], tgeo["qx"]], 0)
-        tez = jnp.concatenate([tgeo["z1"][None], tgeo["qz"]], 0)
-    else:
-        chord = jnp.zeros((1,) + s.shape, jnp.int32)
-        ex, ez, tex, tez = geo["x1"][None], geo["z1"][None], tgeo["x1"][None], tgeo["z1"][None]
-    foci = chord + _crossing(fp(ex, ez, res["ox"], res["oz"]), fp(tex, tez, tres["ox"], tres["oz"]),
-                             jnp.inf, True)
+    (en, ch), (ten, tch) = jax.jvp(lambda v: _chain(curve, eta, alpha, v, F), (s_eff,),
+                                   (jnp.ones_like(s_eff),))
+    cat = lambda a, b: jnp.concatenate([a[None], b], 0)
+    one = jnp.ones((), dtype)
+    # amplitudes: entry reflection (p = 0); entry transmission x internal reflections so far
+    # x exit transmission (p >= 1)
+    (r_s, r_p), (t_s, t_p), _ = _fresnel(en["ci"], one, eta)
+    (R_s, R_p), (T_s, T_p), tir = _fresnel(ch["ci"], eta, one)
+    before = lambda R: jnp.cumprod(cat(jnp.ones(s.shape, R.dtype), R), 0)[:F - 1]
+    amp = cat(jnp.stack([r_s, r_p], -1),
+              jnp.stack([t_s * before(R_s) * T_s, t_p * before(R_p) * T_p], -1))
+    opl_in = en["x"] * dx0 + en["z"] * dz0                  # centre plane -> entry point
+    ox, oz = cat(en["ox"], ch["ox"]), cat(en["oz"], ch["oz"])
+    ex, ez = cat(en["x"], ch["qx"]), cat(en["z"], ch["qz"])
+    opl = opl_in + cat(jnp.zeros_like(opl_in), eta * jnp.cumsum(ch["t"], 0)) - (ex * ox + ez * oz)
+    entered = jnp.cumsum(~ch["ok"], 0) == 0
+    valid = cat(en["hit"], en["hit"] & entered & ~tir) & hit_s
+    # foci (D-R3): on chords 1 .. p (cumulative), then on the family's outgoing half-line
+    chord = _crossing(dict(py=ch["px"], pz=ch["pz"], dy=ch["dx"], dz=ch["dz"]),
+                      dict(py=tch["px"], pz=tch["pz"], dy=tch["dx"], dz=tch["dz"]), ch["t"], True)
+    foci = cat(jnp.zeros(s.shape, jnp.int32), jnp.cumsum(chord, 0))
+    tox, toz = cat(ten["ox"], tch["ox"]), cat(ten["oz"], tch["oz"])
+    tex, tez = cat(ten["x"], tch["qx"]), cat(ten["z"], tch["qz"])
+    foci = foci + _crossing(dict(py=ex, pz=ez, dy=ox, dz=oz), dict(py=tex, pz=tez, dy=tox, dz=toz),
+                            jnp.inf, True)
     # axis: sign changes of x . n_perp along the hit points and the outgoing half-line
     u = ex * ux + ez * uz
-    ch = (u[:-1] * u[1:] < 0).astype(jnp.int32)
-    ax = jnp.concatenate([jnp.zeros((1,) + s.shape, jnp.int32), jnp.cumsum(ch, 0)], 0)
-    ax = ax + (u * (res["ox"] * ux + res["oz"] * uz) < 0).astype(jnp.int32)
-    valid = res["valid"] & hit_s[None]
-    psi = jnp.arctan2(dx0 * res["oz"] - dz0 * res["ox"], dx0 * res["ox"] + dz0 * res["oz"])
+    flips = (u[:-1] * u[1:] < 0).astype(jnp.int32)
+    ax = cat(jnp.zeros(s.shape, jnp.int32), jnp.cumsum(flips, 0))
+    ax = ax + (u * (ox * ux + oz * uz) < 0).astype(jnp.int32)
+    psi = jnp.arctan2(dx0 * oz - dz0 * ox, dx0 * ox + dz0 * oz)
     zero = jnp.zeros((), dtype)
-    return Fan(s=s, psi=jnp.where(valid, psi, zero), amp=jnp.where(valid[..., None], res["amp"], 0j),
-               opl=jnp.where(valid, res["opl"], zero), foci=jnp.where(valid, foci, 0),
+    return Fan(s=s, psi=jnp.where(valid, psi, zero), amp=jnp.where(valid[..., None], amp, 0j),
+               opl=jnp.where(valid, opl, zero), foci=jnp.where(valid, foci, 0),
                axis=jnp.where(valid, ax, 0), valid=valid)
 
 
