@@ -218,7 +218,7 @@ def test_inclination_c16():
 def test_tir_exit_marks_family_invalid():
     """A strongly deformed section (c_2 = -0.4: an elongated oval) traps some rays: where an
     exit is beyond the critical angle that family is invalid and its power goes on."""
-    curve = pc.polar_curve([0.0, 0.0, 0.4])
+    curve = pc.cosine_series([0.0, 0.0, 0.4])
     s = np.linspace(-0.99, 0.99, 2001)
     f = trace_drop(curve, 1.5, s=s, families=6, inclination=0.4)
     v = np.asarray(f.valid)
@@ -282,7 +282,7 @@ def test_eager_errors():
     with pytest.raises(ValueError, match="orientation"):
         pc.beard_chuang(1.0, "sideways")
     with pytest.raises(ValueError, match="sum"):
-        pc.polar_curve([0.5, 0.6])
+        pc.cosine_series([0.5, 0.6])
     with pytest.raises(TypeError):
         trace_drop(fl.cylinder(1.33), 1.33)
     with warnings.catch_warnings():

@@ -7,7 +7,10 @@ A collimated beam arrives with propagation direction ``(cos alpha, -sin alpha)``
 ``alpha`` = ``inclination`` is the sun's elevation above the horizontal (0 = horizontal
 light, the axis vertical; the light travels downwards for alpha > 0). Every convention of
 the output (units of a, signs of s and psi, (⊥, ∥) amplitudes, optical path between the
-centre planes, foci and axis counts) is that of :mod:`.fan`.
+centre planes, foci and axis counts) is that of :mod:`.fan`. The impact parameter s is
+measured from the curve's origin; the rays that hit fill the drop's projected extent, which
+is (-1, 1) for a circle but not for a flattened drop (e.g. (-0.929, 0.970) for 1 mm at
+inclination 0): :func:`impact_grid` spans it.
 
 Families p = 0 .. F-1 share one trace: the entry hit gives p = 0 (external reflection) and
 the refracted ray; the k-th internal hit gives family k (refraction out) and the reflected
@@ -176,7 +179,7 @@ def trace_drop(curve: PolarCurve, eta, *, inclination=0.0, s=None, n_rays: int =
 
     Args:
         curve: the section, lengths in units of a (:func:`~.polar_curve.beard_chuang` with the
-            radius in mm, :func:`~.polar_curve.circle_curve`, :func:`~.polar_curve.polar_curve`).
+            radius in mm, :func:`~.polar_curve.circle_curve`, :func:`~.polar_curve.cosine_series`).
         eta: relative refractive index of the drop (> 1; scalar).
         inclination: the sun's elevation above the horizontal in radians (the tilt of the
             incident direction in the meridian plane; 0 = horizontal light).
@@ -192,7 +195,7 @@ def trace_drop(curve: PolarCurve, eta, *, inclination=0.0, s=None, n_rays: int =
     """
     if not isinstance(curve, PolarCurve):
         raise TypeError("flatland.trace_drop: curve must be a PolarCurve (beard_chuang, circle_curve, "
-                        f"polar_curve), got {type(curve).__name__}")
+                        f"cosine_series), got {type(curve).__name__}")
     F = int(families)
     if F < 1:
         raise ValueError(f"flatland.trace_drop: families = {F}; valid range [1, inf)")

@@ -60,24 +60,24 @@ def _concrete(x) -> bool:
     return not isinstance(x, jax.core.Tracer)
 
 
-def polar_curve(c, orientation: str = "down") -> PolarCurve:
+def cosine_series(c, orientation: str = "down") -> PolarCurve:
     """A polar curve from its coefficients ``c`` (any length M >= 1; c[0] is the constant term)."""
     if orientation not in _ORIENT:
-        raise ValueError(f"polar_curve: orientation = {orientation!r}; valid: 'down', 'up'")
+        raise ValueError(f"cosine_series: orientation = {orientation!r}; valid: 'down', 'up'")
     c = jnp.atleast_1d(jnp.asarray(c, jnp.result_type(float)))
     if c.ndim != 1:
-        raise ValueError(f"polar_curve: c must be 1-D, got shape {c.shape}")
+        raise ValueError(f"cosine_series: c must be 1-D, got shape {c.shape}")
     if _concrete(c):
         cv = np.asarray(c)
         # sum |c_n| < 1 keeps r > 0 everywhere: the curve is star-shaped about its origin
         if not np.all(np.isfinite(cv)) or np.sum(np.abs(cv)) >= 1.0:
-            raise ValueError(f"polar_curve: c = {cv.tolist()} must be finite with sum |c_n| < 1")
+            raise ValueError(f"cosine_series: c = {cv.tolist()} must be finite with sum |c_n| < 1")
     return PolarCurve(c, jnp.asarray(_ORIENT[orientation], c.dtype))
 
 
 def circle_curve(orientation: str = "down") -> PolarCurve:
     """The unit circle (the a <= 0.4 mm row of Table 3.1), as a :class:`PolarCurve`."""
-    return polar_curve(jnp.zeros(8), orientation)
+    return cosine_series(jnp.zeros(8), orientation)
 
 
 def beard_chuang_coefficients(radius_mm):
@@ -101,7 +101,7 @@ def beard_chuang_coefficients(radius_mm):
 def beard_chuang(radius_mm, orientation: str = "down") -> PolarCurve:
     """The Beard–Chuang meridian of a raindrop of equal-volume radius ``radius_mm`` (mm), in
     units of that radius (Sadeghi Eq. 3.1 with Table 3.1)."""
-    return polar_curve(beard_chuang_coefficients(radius_mm), orientation)
+    return cosine_series(beard_chuang_coefficients(radius_mm), orientation)
 
 
 def _cheb_to_power(m: int) -> np.ndarray:
