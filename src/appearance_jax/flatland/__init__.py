@@ -9,6 +9,12 @@ drop and barbule models (spec seed-001 §4, seed-000 §5 and M22, seed-002 §1.2
 - :mod:`.tallies`: far-field histograms and the BCSDF (:func:`trace_fiber`,
   :func:`bcsdf_from_histogram`), per-lobe albedo, the deterministic smooth mode
   (:func:`smooth_lobes`), the camera-side next-event estimator (:func:`nee_bcsdf`).
+- :mod:`.polar_curve`, :mod:`.drop`: water drops (a circle or the Beard–Chuang meridian,
+  Sadeghi Eq. 3.1) and the deterministic fan tracer :func:`trace_drop` returning a
+  :class:`Fan` (:mod:`.fan`: amplitudes, optical paths, foci and axis counts per path family).
+- :mod:`.farfield`: far-field collectors of a fan (coherent, incoherent, KDE; cylinder and
+  axisymmetric sphere lifts): :func:`far_field`, :func:`far_field_amplitude`,
+  :func:`family_energy`.
 """
 
 from .section import Interface, Medium, Section, Shape, cylinder, ellipse_row, fiber
@@ -16,3 +22,7 @@ from .tracer import Records, launch, n_bands, trace
 from .tallies import (BCSDF, Histogram, SmoothLobes, bcsdf_from_histogram, masking_fraction, nee_bcsdf,
                       smooth_lobes, trace_fiber)
 from .caustics import Caustics, caustics
+from .fan import Fan
+from .polar_curve import PolarCurve, beard_chuang, beard_chuang_coefficients, circle_curve, cosine_series
+from .drop import impact_grid, trace_drop
+from .farfield import far_field, far_field_amplitude, family_energy
