@@ -1,11 +1,12 @@
-"""Rainbow phase functions (phase/rainbow.py) against Lorenz–Mie (phase/mie.py, itself checked
+"""Rainbow phase functions (flatland/rainbow.py) against Lorenz–Mie (phase/mie.py, itself checked
 against miepython and a 40-digit series) and the spec's geometric numbers (seed-002 C9, C13,
 C15, C16, fog bows)."""
 
 import numpy as np
 import pytest
 
-from appearance_jax.phase import descartes, mie, rainbow
+from appearance_jax.flatland import rainbow
+from appearance_jax.phase import descartes, mie
 
 THETA = np.radians(np.arange(124.0, 148.0, 0.01))
 

@@ -3,14 +3,18 @@ diffraction blur, polarisation and colour (Sadeghi 2011 Ch. 3, §3.4, L1168–12
 seed-002 §1.2.4–§1.2.9, §4).
 
 For each wavelength (default the 33 of Table 3.2, 380–700 nm, decision D-R2) a fan of rays is
-traced through the drop's section (:func:`appearance_jax.flatland.trace_drop`), carrying
+traced through the drop's section (:func:`~appearance_jax.flatland.drop.trace_drop`), carrying
 complex Fresnel amplitudes, optical paths and focal counts, and collected coherently in the
 far field (:func:`appearance_jax.flatland.far_field`, the verified phase recipe of spec §1.2.5:
 interference gives the supernumerary bows). The axisymmetric lift turns the 2-D section into
-the 3-D drop, so for a sphere the result approximates Lorenz–Mie (:mod:`.mie`) away from the
+the 3-D drop, so for a sphere the result approximates Lorenz–Mie
+(:mod:`appearance_jax.phase.mie`) away from the
 forward peak; diffraction, which geometric optics lacks, is approximated by Sadeghi's
 Gaussian blur (Table 3.3; σ above ``theta_split``, 2σ below it on the secondary side,
 decision D-R5).
+
+It lives in ``flatland`` (not ``phase``) because it is built on the drop tracer, which sits in a
+layer above the phase functions (docs/architecture.md).
 
 Output units: ``(1 / pi a^2) dσ/dΩ`` per polarisation (⊥ and ∥ to the scattering plane), the
 Mie equivalents being ``|S1|^2 / (pi x^2)`` and ``|S2|^2 / (pi x^2)``; ``a`` is the drop's
@@ -49,7 +53,7 @@ Example::
 
     import jax; jax.config.update("jax_enable_x64", True)
     import numpy as np
-    from appearance_jax.phase import rainbow
+    from appearance_jax.flatland import rainbow
     t = rainbow.drop_phase_function(0.3)               # 33 wavelengths, sphere, blurred
     rgb = rainbow.to_srgb(t)                           # (angles, 3) linear sRGB under D65
     i = rainbow.intensity(t, filter_angle=0.0)         # behind a polariser along ⊥
@@ -65,11 +69,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import spectral
-from ..flatland import farfield, polar_curve as pcv
-from ..flatland.drop import trace_drop
-from ..flatland.fan import Fan
 from ..optics import water
-from . import descartes
+from ..phase import descartes
+from . import farfield, polar_curve as pcv
+from .drop import trace_drop
+from .fan import Fan
 
 SHAPES = ("auto", "sphere", "beard_chuang")
 VIEWS = ("top", "bottom", "side")
