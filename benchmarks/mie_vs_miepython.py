@@ -23,15 +23,7 @@ import time
 
 import jax
 import numpy as np
-
-
-def best(fn, repeats):
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        jax.block_until_ready(fn())
-        ts.append(time.perf_counter() - t0)
-    return min(ts)
+from _common import best_time as best
 
 
 def first(fn):
@@ -62,7 +54,7 @@ def main():
         fn = jax.jit(lambda x, mu, terms=terms: S.amplitudes(*S.coefficients(1.333, x, terms), mu))
         mu_j = jnp.asarray(mu)
         t_first = first(lambda: fn(x, mu_j))
-        t_ours = best(lambda: fn(x, mu_j), args.repeats)
+        t_ours = best(lambda: jax.block_until_ready(fn(x, mu_j)), args.repeats)
         miepython.S1_S2(1.333, x, mu, norm="wiscombe")  # numba warm-up
         t_ref = best(lambda: miepython.S1_S2(1.333, x, mu, norm="wiscombe"), args.repeats)
         print(f"{x:6.0f} {terms:6d} {t_first:15.2f} {1e3 * t_ours:10.2f} {1e3 * t_ref:15.2f} {t_ref / t_ours:7.2f}")
@@ -80,7 +72,7 @@ def main():
 
     xs_j = jnp.asarray(xs)
     t_first = first(lambda: eff(xs_j))
-    t_ours = best(lambda: eff(xs_j), args.repeats)
+    t_ours = best(lambda: jax.block_until_ready(eff(xs_j)), args.repeats)
     m_mp = complex(m.real, -m.imag)
     n_ref = min(args.spheres, 400)
     miepython.efficiencies_mx(m_mp, xs[0])

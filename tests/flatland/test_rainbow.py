@@ -123,6 +123,11 @@ def test_colours_and_fog_bow():
     fog = rainbow.drop_phase_function(0.01, wavelengths_nm=wl, theta=theta)
     _, spread_fog = chroma_spread(fog, 135, 143)
     assert spread_fog < 0.5 * spread_rain, (spread_fog, spread_rain)
+    # the sigma / 2 sigma blur is blended across theta_split: no step there even for fog (sigma ~3 deg)
+    i = rainbow.intensity(fog)[-1]
+    j = np.argmin(np.abs(theta - float(descartes.theta_split(1.331))))
+    steps = np.abs(np.diff(i))
+    assert steps[j - 3:j + 3].max() < 3.0 * np.median(steps[j - 100:j + 100]) + 1e-12
 
 
 def test_bad_inputs():

@@ -11,7 +11,7 @@ the 3-D drop, so for a sphere the result approximates Lorenz–Mie
 (:mod:`appearance_jax.phase.mie`) away from the
 forward peak; diffraction, which geometric optics lacks, is approximated by Sadeghi's
 Gaussian blur (Table 3.3; σ above ``theta_split``, 2σ below it on the secondary side,
-decision D-R5).
+decision D-R5, blended over ±σ around the split).
 
 It lives in ``flatland`` (not ``phase``) because it is built on the drop tracer, which sits in a
 layer above the phase functions (docs/architecture.md).
@@ -123,15 +123,19 @@ def _blur_matrix(theta, sigma):
 
 def blur(values, theta, radius_mm, n, *, extrapolation="continuous"):
     """Sadeghi's diffraction blur (§3.4.4, Table 3.3) of ``values`` (L, G) on the angle grid
-    ``theta`` (G,) (rad), row l at index ``n[l]``: a Gaussian of σ(a) for output angles at or
-    above ``theta_split(n)``, 2σ below (decision D-R5). Kernels are renormalised on the grid,
-    so let the grid extend ~6σ beyond the angles you use."""
+    ``theta`` (G,) (rad), row l at index ``n[l]``: a Gaussian of σ(a) for output angles above
+    ``theta_split(n)``, 2σ below (decision D-R5). The two results are blended with weight
+    ``(1 + tanh((θ - θ_split)/σ))/2`` instead of switched: a hard switch leaves a step at
+    θ_split that is invisible for rain (the dark band) but shows for fog drops, whose σ is
+    several degrees. Kernels are renormalised on the grid, so let the grid extend ~6σ beyond
+    the angles you use."""
     theta = np.asarray(theta, float)
     v = np.atleast_2d(np.asarray(values))
     sigma = float(descartes.diffraction_sigma(radius_mm, extrapolation))
     split = np.asarray(descartes.theta_split(np.atleast_1d(np.asarray(n, float))))[:, None]
     k1, k2 = _blur_matrix(theta, sigma), _blur_matrix(theta, 2.0 * sigma)
-    return np.where(theta[None, :] >= split, v @ k1.T, v @ k2.T)
+    w = 0.5 * (1.0 + np.tanh((theta[None, :] - split) / sigma))
+    return w * (v @ k1.T) + (1.0 - w) * (v @ k2.T)
 
 
 def _check(radius_mm, shape, view, inclination, families, index):
