@@ -258,7 +258,9 @@ def test_implicit_gradients_vs_finite_differences():
         return jnp.concatenate([f.psi.ravel(), f.opl.ravel(), jnp.abs(f.amp).ravel()])
 
     x0 = jnp.array([1.2, 1.331, 0.1])
-    J = jax.jacrev(fan_out)(x0)
+    # forward mode here (3 inputs; reverse mode of the same trace is checked on the hits above
+    # and costs ~15 s of compilation more)
+    J = jax.jacfwd(fan_out)(x0)
     fd = np.stack([(fan_out(x0.at[k].add(1e-6)) - fan_out(x0.at[k].add(-1e-6))) / 2e-6 for k in range(3)], -1)
     np.testing.assert_allclose(np.asarray(J), fd, atol=1e-6)
 
@@ -290,6 +292,7 @@ def test_eager_errors():
         pc.beard_chuang(3.0)                            # the last row: no warning
 
 
+@pytest.mark.slow  # ~12 s of compilation; tests/flatland/test_farfield.py vmaps traced fans by default
 def test_vmap_over_wavelengths():
     curve = pc.beard_chuang(0.5)
     s = jnp.linspace(-0.9, 0.9, 64)

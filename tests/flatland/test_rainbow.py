@@ -103,7 +103,7 @@ def test_non_spherical_views_c15_c16():
 def test_colours_and_fog_bow():
     # dispersion: the primary is red outside (smaller scattering angle), violet inside; the
     # secondary reversed; fog drops (10 um) give a whitish bow (Sadeghi L1086)
-    wl = np.arange(400.0, 701.0, 25.0)
+    wl = np.arange(400.0, 701.0, 50.0)
     theta = np.radians(np.arange(122.0, 146.0, 0.02))
     deg = np.degrees(theta)
 
