@@ -146,6 +146,11 @@ GRID: dict[str, list[Case]] = {
         Case("haze_rgb", dict(preset="haze"), lossless=True),
         Case("soot", dict(preset="soot"), lossless=True),
     ],
+    "tabulated_phase": [
+        Case("rayleigh", dict(preset="rayleigh"), lossless=True),
+        Case("two_lobes_rgb", dict(preset="two_lobes_rgb"), lossless=True,
+             opts={"furnace": dict(n_theta=512, n_phi=16)}),  # narrow lobes, symmetric about wi
+    ],
 }
 
 _FINE = {"furnace": dict(n_theta=256, n_phi=512)}  # narrow lobes need a finer quadrature

@@ -37,7 +37,8 @@ def mie_curve(radius_mm, theta, wl=650.0, n=1.331):
     p = mie.Params(radius_um=radius_mm * 1e3, wavelength_nm=wl, n_particle=n)
     S1, S2 = mie.amplitudes(p, np.cos(theta))
     x = 2 * np.pi * radius_mm * 1e6 / wl
-    return (np.abs(np.asarray(S1)[:, 0]) ** 2 + np.abs(np.asarray(S2)[:, 0]) ** 2) / (np.pi * x * x)
+    # unpolarised incident light: the mean of the two polarisations
+    return 0.5 * (np.abs(np.asarray(S1)[:, 0]) ** 2 + np.abs(np.asarray(S2)[:, 0]) ** 2) / (np.pi * x * x)
 
 
 def figure_vs_mie(out: Path):
@@ -58,9 +59,9 @@ def figure_vs_mie(out: Path):
         ax.plot(deg[sel], ref[sel], color="tab:red", lw=0.8, label="Lorenz–Mie")
         if log:
             ax.set_yscale("log")
-            ax.set_ylim(3e-4, 2.0)
+            ax.set_ylim(1.5e-4, 1.0)
         else:
-            ax.set_ylim(0.0, 0.6)
+            ax.set_ylim(0.0, 0.3)
         ax.set_xlim(lo, hi)
         ax.set_xlabel("scattering angle θ (deg)")
         ax.set_ylabel("(1/πa²) dσ/dΩ, unpolarised (1/sr)")

@@ -18,7 +18,7 @@ from .bcsdf import chiang, huang, marschner, sadeghi, thread
 from .bsdf import cloth, cosmetics, iridescent, lambert, rough_conductor, rough_dielectric, rough_plastic, snake
 from .bsdf.sum import sum_model
 from .core.model import Model
-from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes
+from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes, tabulated
 
 _MODELS: tuple[Model, ...] = (
     lambert.MODEL,
@@ -34,6 +34,7 @@ _MODELS: tuple[Model, ...] = (
     hg_mixture.MODEL,
     sggx_flakes.MODEL,
     mie.MODEL,
+    tabulated.MODEL,
     chiang.MODEL,
     marschner.MODEL,
     sadeghi.MODEL,

@@ -56,7 +56,10 @@ Example::
     from appearance_jax.flatland import rainbow
     t = rainbow.drop_phase_function(0.3)               # 33 wavelengths, sphere, blurred
     rgb = rainbow.to_srgb(t)                           # (angles, 3) linear sRGB under D65
-    i = rainbow.intensity(t, filter_angle=0.0)         # behind a polariser along ⊥
+    i = rainbow.intensity(t, filter_angle=0.0)         # sunlight behind a polariser along ⊥
+    # a registered phase function of the whole drop (p = 0..3) for rendering:
+    full = rainbow.drop_phase_function(0.3, theta=rainbow.full_theta(), families=(0, 1, 2, 3))
+    p = rainbow.tabulated_params(full)                 # phase.tabulated.Params, 33 bands
 """
 
 from __future__ import annotations
@@ -83,9 +86,10 @@ SPHERE_LIMIT_MM = 0.4  # Table 3.1: drops up to 0.4 mm are spheres
 class RainbowTable(NamedTuple):
     """A tabulated drop phase function: rows = wavelengths, columns = scattering angles.
 
-    ``perp``, ``par``: (1/pi a^2) dσ/dΩ for the field ⊥ / ∥ to the scattering plane;
-    ``cross``: the coherence E⊥ E∥* (complex; zero for ``mode="incoherent"``), needed for
-    polarising filters at other angles.
+    ``perp``, ``par``: (1/pi a^2) dσ/dΩ for incident light polarised ⊥ / ∥ to the scattering
+    plane (Mie's |S1|²/(pi x²), |S2|²/(pi x²)); unpolarised light gets their mean
+    (:func:`intensity`). ``cross``: E⊥ E∥* for incident light polarised at 45° to the plane
+    (complex; zero for ``mode="incoherent"``), for Jones/Stokes work with polarised sources.
     """
 
     theta: np.ndarray            # (G,) rad
@@ -234,13 +238,16 @@ def drop_phase_function(radius_mm, *, wavelengths_nm=None, theta=None, shape="au
 
 
 def intensity(table: RainbowTable, filter_angle=None):
-    """Intensity (L, G) with no polariser (``None``: ⊥ + ∥) or behind a linear polariser whose
-    axis makes ``filter_angle`` (rad) with the normal of the scattering plane (0: passes ⊥,
-    pi/2: passes ∥): I = I⊥ cos² + I∥ sin² + Re(E⊥ E∥*) sin 2χ."""
+    """Scattered intensity (L, G) for unpolarised incident light (sunlight), in the table's
+    units: ``(I⊥ + I∥) / 2`` with no polariser, ``(I⊥ cos²χ + I∥ sin²χ) / 2`` behind a
+    linear polariser whose axis makes ``filter_angle`` = χ (rad) with the normal of the
+    scattering plane (0 passes ⊥, pi/2 passes ∥). For unpolarised incident light the two
+    scattered components are incoherent (a sphere does not mix them), so ``cross`` does not
+    enter; a circular analyser passes half of the unpolarised intensity."""
     if filter_angle is None:
-        return table.perp + table.par
+        return 0.5 * (table.perp + table.par)
     c, s = math.cos(filter_angle), math.sin(filter_angle)
-    return table.perp * c * c + table.par * s * s + table.cross.real * 2.0 * s * c
+    return 0.5 * (table.perp * c * c + table.par * s * s)
 
 
 def to_srgb(table: RainbowTable, filter_angle=None, illuminant="D65"):
@@ -250,6 +257,26 @@ def to_srgb(table: RainbowTable, filter_angle=None, illuminant="D65"):
     spec = intensity(table, filter_angle).T  # (G, L)
     return np.asarray(spectral.spectrum_to_linear_srgb(jnp.asarray(spec), jnp.asarray(table.wavelength_nm),
                                                        illuminant))
+
+
+def full_theta(n_angles: int = 3601):
+    """``n_angles`` equally spaced scattering angles over [0, pi] (rad): the grid of
+    :mod:`appearance_jax.phase.tabulated`."""
+    return np.linspace(0.0, np.pi, int(n_angles))
+
+
+def tabulated_params(table: RainbowTable, filter_angle=None):
+    """The table as :class:`appearance_jax.phase.tabulated.Params` (one band per wavelength),
+    a registered phase function (``eval``/``sample``/``pdf``, normalised over the sphere).
+    ``table`` must be computed on :func:`full_theta`; include p = 1 (``families=(0, 1, 2,
+    3)``) for a phase function of the whole drop (the forward diffraction peak stays absent)."""
+    from ..phase import tabulated
+
+    G = table.theta.shape[0]
+    if G < 2 or not np.allclose(table.theta, full_theta(G), atol=1e-12):
+        raise ValueError("rainbow.tabulated_params: the table must be computed on full_theta(n) "
+                         "(equally spaced angles over [0, pi])")
+    return tabulated.Params(values=np.clip(intensity(table, filter_angle), 0.0, None).T)
 
 
 def peak(table: RainbowTable, lo_deg, hi_deg, row=0):
