@@ -165,7 +165,8 @@ def _smooth_peak(theta_deg, intensity, lo, hi, sigma_deg=0.05):
     return theta_deg[sel][np.argmax(sm[sel])], sm
 
 
-@pytest.mark.parametrize("radius_mm,peak", [(0.1, 138.6), (0.4, 138.04)])
+@pytest.mark.parametrize("radius_mm,peak", [(0.1, 138.6), (0.2, 138.22), (0.3, 138.06), (0.4, 138.04),
+                                             (0.5, 137.99), (1.0, 137.84)])
 def test_rainbow_peak_c6(radius_mm, peak):
     # spec seed-002 C6 (verified against miepython there): Mie primary peak at 650 nm, n = 1.331
     p = mie.Params(radius_um=radius_mm * 1e3, wavelength_nm=650.0, n_particle=1.331)
