@@ -225,17 +225,21 @@ def test_diffraction_sigma_table_interpolation_and_extrapolation():
         assert np.degrees(float(d.diffraction_sigma(a, "law"))) == pytest.approx(law, rel=1e-13)
     # ... which jumps at the table's ends (sigma would grow with the radius across 0.1 mm)
     assert float(d.diffraction_sigma(0.0999, "law")) < float(d.diffraction_sigma(0.1, "law"))
-    # the default anchors the a^(-2/3) law at the nearest end row: continuous
-    assert np.degrees(float(d.diffraction_sigma(0.05))) == pytest.approx(0.70 * 0.5 ** (-2 / 3), rel=1e-13)
-    assert np.degrees(float(d.diffraction_sigma(2.0))) == pytest.approx(0.15 * 2.0 ** (-2 / 3), rel=1e-13)
+    # the default is the law (issue 23's wording)
+    assert float(d.diffraction_sigma(0.01)) == float(d.diffraction_sigma(0.01, "law"))
+    # "continuous" anchors the a^(-2/3) law at the nearest end row
+    assert np.degrees(float(d.diffraction_sigma(0.05, "continuous"))) == pytest.approx(0.70 * 0.5 ** (-2 / 3),
+                                                                                       rel=1e-13)
+    assert np.degrees(float(d.diffraction_sigma(2.0, "continuous"))) == pytest.approx(0.15 * 2.0 ** (-2 / 3),
+                                                                                      rel=1e-13)
     for a in (0.1, 1.0):
         lo = float(d.diffraction_sigma(a * (1 - 1e-9), "continuous"))
         hi = float(d.diffraction_sigma(a * (1 + 1e-9), "continuous"))
         assert lo == pytest.approx(hi, rel=1e-6)
     # monotone decreasing, with a finite gradient
     a = np.geomspace(0.005, 5.0, 200)
-    assert np.all(np.diff(np.asarray(d.diffraction_sigma(a))) < 0)
-    g = jax.vmap(jax.grad(d.diffraction_sigma))(a)
+    assert np.all(np.diff(np.asarray(d.diffraction_sigma(a, "continuous"))) < 0)
+    g = jax.vmap(jax.grad(lambda r: d.diffraction_sigma(r, "continuous")))(a)
     assert np.all(np.isfinite(g)) and np.all(np.asarray(g) < 0)
 
 

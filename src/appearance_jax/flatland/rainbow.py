@@ -125,7 +125,7 @@ def _blur_matrix(theta, sigma):
     return w / w.sum(axis=1, keepdims=True)
 
 
-def blur(values, theta, radius_mm, n, *, extrapolation="continuous"):
+def blur(values, theta, radius_mm, n, *, extrapolation="law"):
     """Sadeghi's diffraction blur (§3.4.4, Table 3.3) of ``values`` (L, G) on the angle grid
     ``theta`` (G,) (rad), row l at index ``n[l]``: a Gaussian of σ(a) for output angles above
     ``theta_split(n)``, 2σ below (decision D-R5). The two results are blended with weight
