@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core.model import Model, boundary, with_bands
-from ..core.params import Bands, param, params_class
+from ..core.params import Real, param, params_class
 from ..core.rng import uniforms
 from ..core.vec import dot
 from .henyey_greenstein import direction_about
@@ -44,7 +44,8 @@ UNIFORM_MIX = 0.01
 
 @params_class
 class Params:
-    values: Bands = param((1.0, 1.0), lo=0.0, unit="any", doc="p at G equally spaced angles in [0, pi]; (G,) or (G, bands)")
+    # a table, not a per-band scalar: its first axis is the angle grid, its optional second the bands
+    values: Real = param((1.0, 1.0), lo=0.0, unit="any", doc="p at G equally spaced angles in [0, pi]; (G,) or (G, bands)")
 
     def _validate(self):
         v = np.asarray(self.values, float)
