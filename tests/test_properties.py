@@ -148,8 +148,8 @@ GRID: dict[str, list[Case]] = {
     ],
     "tabulated_phase": [
         Case("rayleigh", dict(preset="rayleigh"), lossless=True),
-        Case("two_lobes_rgb", dict(preset="two_lobes_rgb"), lossless=True,
-             opts={"furnace": dict(n_theta=512, n_phi=16)}),  # narrow lobes, symmetric about wi
+        Case("coarse_random_bands", dict(values=np.random.default_rng(5).uniform(0.1, 2.0, size=(19, 2))),
+             lossless=True),
     ],
 }
 
@@ -229,8 +229,9 @@ SLOW_GRID: dict[str, list[Case]] = {
     + [Case("opposed", dict(w_g=0.3, g1=0.95, g2=-0.95), lossless=True, opts=_PEAKED)],
     "mie": [Case(name, dict(preset=name), lossless=True, opts=_PEAKED) for name in ("rayleigh", "fog")]
     + [Case("glass_x20", dict(radius_um=2.0, wavelength_nm=600.0, n_particle=1.5), lossless=True, opts=_PEAKED)],
-    "tabulated_phase": [Case("coarse_random", dict(values=np.random.default_rng(5).uniform(0.1, 2.0, size=(19, 2))),
-                             lossless=True)],
+    # narrow lobes (a 0.03 rad bow-like one), symmetric about wi
+    "tabulated_phase": [Case("two_lobes_rgb", dict(preset="two_lobes_rgb"), lossless=True,
+                             opts={"furnace": dict(n_theta=512, n_phi=16)})],
 }
 
 

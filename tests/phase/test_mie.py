@@ -205,6 +205,7 @@ def test_float32_accuracy():
 def test_gradients_match_finite_differences():
     cos_t = jnp.cos(jnp.radians(jnp.array([20.0, 90.0, 150.0])))
 
+    @jax.jit
     def f(r, n, k):
         p = mie.Params(radius_um=r, wavelength_nm=600.0, n_particle=n, k_particle=k, terms=64)
         return jnp.sum(jnp.log(mie.phase_function.kernel(p, cos_t)))
