@@ -350,3 +350,12 @@ def test_kde_window_equals_dense():
         a = np.asarray(far_field(fan, q, lift=lift, mode="kde", width=width))
         b = np.asarray(ff._kde(fan, jnp.asarray(q), width, lift, 512))
         np.testing.assert_allclose(a, b, rtol=1e-10, atol=1e-12 * b.max())
+
+
+def test_traced_fan_needs_max_hits():
+    # under jit the exact hit count cannot be read from the fan: a guessed cap could drop hits
+    # silently, so the collector asks for max_hits instead
+    fan = jax.tree_util.tree_map(jnp.asarray, circle_fan((np.arange(200) + 0.5) / 200, N_INDEX, 3))
+    th = jnp.linspace(2.0, 2.6, 50)
+    with pytest.raises(ValueError, match="max_hits"):
+        jax.jit(lambda f: far_field(f, th, lift="sphere", mode="incoherent"))(fan)

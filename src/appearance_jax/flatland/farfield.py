@@ -49,8 +49,9 @@ spec C8 setting); a float32 *tracer* may not resolve the caustic's segments as w
 Segments are matched to sorted angles with ``searchsorted`` and each segment adds to at
 most ``max_hits`` consecutive angles (a ``lax.scan`` over hit slots: memory O(rays +
 angles), never rays × angles). ``max_hits=None`` takes the exact need from a concrete fan
-(:func:`needed_hits`) and falls back to 32 under tracing; a segment that spans more grid
-angles than that drops the excess, so pass ``max_hits`` explicitly inside ``jit``.
+(:func:`needed_hits`); with a traced fan or traced angles (inside ``jit``/``vmap``) it must
+be given (static), because a segment that spans more grid angles than ``max_hits`` drops
+the excess: size it with :func:`needed_hits` on a representative concrete fan, with margin.
 """
 
 from __future__ import annotations
@@ -67,7 +68,6 @@ LIFTS = ("cylinder", "sphere")
 MODES = ("coherent", "incoherent", "kde")
 FOCAL_PHASES = ("maslov", "thesis")
 SPREADINGS = ("segment", "vertex")
-DEFAULT_TRACED_HITS = 32
 KDE_SIGMAS = 8.0  # the windowed KDE cuts each Gaussian here (exp(-32): below float64 noise)
 
 
@@ -333,7 +333,10 @@ def _hits(fan, angles, lift, max_hits):
     if max_hits is not None:
         return int(max_hits)
     if any(isinstance(a, jax.core.Tracer) for a in jax.tree_util.tree_leaves((fan, angles))):
-        return DEFAULT_TRACED_HITS
+        # a guessed cap would silently drop hits (a plausible wrong intensity): ask instead
+        raise ValueError("flatland.far_field: max_hits = None with a traced fan or traced angles (inside "
+                         "jit/vmap); pass max_hits (static), e.g. needed_hits(fan, angles, lift=...) of a "
+                         "concrete fan with some margin")
     return needed_hits(fan, angles, lift=lift)
 
 
