@@ -37,7 +37,7 @@ def _cross2(a, b):
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _segments_cross(p0, p1, q0, q1):
+def segments_cross(p0, p1, q0, q1):
     """Proper intersection of segments p0-p1 and q0-q1 (arrays of 2-vectors)."""
     d1, d2 = p1 - p0, q1 - q0
     den = _cross2(d1, d2)
@@ -48,7 +48,7 @@ def _segments_cross(p0, p1, q0, q1):
     return (den != 0) & (t > 0) & (t < 1) & (u > 0) & (u < 1)
 
 
-def _halflines_cross(p0, dp, q0, dq):
+def halflines_cross(p0, dp, q0, dq):
     den = _cross2(dp, dq)
     den_safe = np.where(den == 0, 1.0, den)
     w = q0 - p0
@@ -104,8 +104,8 @@ def circle_fan(s, n=1.331, families=4):
             verts = verts[:, :1]
         pair = np.zeros(N - 1, int)
         for c in range(verts.shape[1] - 1):
-            pair += _segments_cross(verts[:-1, c], verts[:-1, c + 1], verts[1:, c], verts[1:, c + 1])
-        pair += _halflines_cross(verts[:-1, -1], out[:-1], verts[1:, -1], out[1:])
+            pair += segments_cross(verts[:-1, c], verts[:-1, c + 1], verts[1:, c], verts[1:, c + 1])
+        pair += halflines_cross(verts[:-1, -1], out[:-1], verts[1:, -1], out[1:])
         foci[p, :-1] = pair
         foci[p, -1] = pair[-1]
         # axis crossings: sign changes of y along the polyline (incoming half-line has y = s)

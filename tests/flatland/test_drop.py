@@ -13,7 +13,9 @@ independent flatland tracer (spec seed-002 §1.2.2, §1.2.5, §1.2.8; checks C11
 
 from __future__ import annotations
 
+import sys
 import warnings
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +27,9 @@ from appearance_jax.core.frame import fiber_direction
 from appearance_jax.core.vec import Vec3
 from appearance_jax.flatland import polar_curve as pc
 from appearance_jax.flatland.drop import impact_grid, trace_drop
+
+sys.path.insert(0, str(Path(__file__).parent))
+from circle_fan import halflines_cross, segments_cross  # noqa: E402
 
 N_WATER = 1.331
 
@@ -310,14 +315,6 @@ def test_single_family():
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:1])
 
 
-def _cross(p0, d0, l0, p1, d1, l1):
-    M = np.array([[d0[0], -d1[0]], [d0[1], -d1[1]]])
-    if abs(np.linalg.det(M)) < 1e-300:
-        return False
-    a, b = np.linalg.solve(M, np.asarray(p1) - np.asarray(p0))
-    return 0 < a < l0 and 0 < b < l1
-
-
 def test_foci_of_a_flattened_drop_equal_neighbour_crossings():
     """Foci from the forward-mode tangents (implicit hit derivatives) against the crossings of
     each ray's polyline with that of a neighbour at s + ds, on a 1 mm Beard–Chuang drop."""
@@ -341,11 +338,8 @@ def test_foci_of_a_flattened_drop_equal_neighbour_crossings():
         for p in range(F):
             if not bool(f.valid[p, j]):
                 continue
-            count = 0
-            for k in range(p):
-                la, lb = np.linalg.norm(A[k + 1, j] - A[k, j]), np.linalg.norm(B[k + 1, j] - B[k, j])
-                count += _cross(A[k, j], (A[k + 1, j] - A[k, j]) / la, la, B[k, j], (B[k + 1, j] - B[k, j]) / lb, lb)
-            count += _cross(A[p, j], dA[p, j], 1e9, B[p, j], dB[p, j], 1e9)
+            count = int(np.sum(segments_cross(A[:p, j], A[1:p + 1, j], B[:p, j], B[1:p + 1, j])))
+            count += int(halflines_cross(A[p, j], dA[p, j], B[p, j], dB[p, j]))
             assert int(f.foci[p, j]) == count, (s[j], p, int(f.foci[p, j]), count)
             checked += 1
     assert checked > 30

@@ -13,9 +13,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["namespace"]
+__all__ = ["is_concrete", "namespace"]
 
 
 def namespace(*xs):
     """``jax.numpy`` if any leaf of ``xs`` is a jax array or tracer, else ``numpy``."""
     return jnp if any(isinstance(x, jax.Array) for x in jax.tree_util.tree_leaves(xs)) else np
+
+
+def is_concrete(*xs) -> bool:
+    """True unless a leaf of ``xs`` is traced (inside ``jit``/``vmap``/``grad``): eager input
+    checks run on concrete values only, so kernels never branch on traced ones."""
+    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))

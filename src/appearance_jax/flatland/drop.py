@@ -47,6 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.arrays import is_concrete
 from ..optics.fresnel import fresnel_amplitudes_complex, snell_cos_t
 from . import polar_curve as pcv
 from .fan import Fan
@@ -157,10 +158,6 @@ def _trace(curve, eta, alpha, s, F):
                axis=jnp.where(valid, ax, 0), valid=valid)
 
 
-def _is_concrete(*xs) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))
-
-
 def impact_grid(curve: PolarCurve, n_rays: int, inclination=0.0):
     """``n_rays`` impact parameters at the midpoints of equal cells spanning the drop's
     projected extent for the given sun inclination ((-1, 1) for a circle)."""
@@ -204,16 +201,16 @@ def trace_drop(curve: PolarCurve, eta, *, inclination=0.0, s=None, n_rays: int =
     alpha = jnp.asarray(inclination, dtype)
     if eta.ndim != 0 or alpha.ndim != 0:
         raise ValueError("flatland.trace_drop: eta and inclination must be scalars (vmap for more)")
-    if _is_concrete(eta) and not (np.isfinite(float(eta)) and float(eta) > 1.0):
+    if is_concrete(eta) and not (np.isfinite(float(eta)) and float(eta) > 1.0):
         raise ValueError(f"flatland.trace_drop: eta = {float(eta)}; valid range (1, inf)")
-    if _is_concrete(alpha) and not np.isfinite(float(alpha)):
+    if is_concrete(alpha) and not np.isfinite(float(alpha)):
         raise ValueError(f"flatland.trace_drop: inclination = {float(alpha)} must be finite")
     if s is None:
         s = impact_grid(curve, n_rays, alpha)
     s = jnp.asarray(s, dtype)
     if s.ndim != 1 or s.shape[0] < 1:
         raise ValueError(f"flatland.trace_drop: s must be 1-D and non-empty, got shape {s.shape}")
-    if _is_concrete(s, curve, alpha):
+    if is_concrete(s, curve, alpha):
         sv = np.asarray(s)
         lo, hi = (float(v) for v in pcv.extent(curve, jnp.sin(alpha), jnp.cos(alpha)))
         if not np.all(np.isfinite(sv)) or np.any(np.diff(sv) <= 0):

@@ -32,6 +32,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.arrays import is_concrete
+
 sg = jax.lax.stop_gradient
 
 #: Sadeghi 2011 Table 3.1 (L1093–1107): equal-volume radius (mm) and c_0..c_7 of Eq. 3.1.
@@ -56,10 +58,6 @@ class PolarCurve(NamedTuple):
     orient: jax.Array   # -1.0: theta = 0 points down (default), +1.0: up
 
 
-def _concrete(x) -> bool:
-    return not isinstance(x, jax.core.Tracer)
-
-
 def cosine_series(c, orientation: str = "down") -> PolarCurve:
     """A polar curve from its coefficients ``c`` (any length M >= 1; c[0] is the constant term)."""
     if orientation not in _ORIENT:
@@ -67,7 +65,7 @@ def cosine_series(c, orientation: str = "down") -> PolarCurve:
     c = jnp.atleast_1d(jnp.asarray(c, jnp.result_type(float)))
     if c.ndim != 1:
         raise ValueError(f"cosine_series: c must be 1-D, got shape {c.shape}")
-    if _concrete(c):
+    if is_concrete(c):
         cv = np.asarray(c)
         # sum |c_n| < 1 keeps r > 0 everywhere: the curve is star-shaped about its origin
         if not np.all(np.isfinite(cv)) or np.sum(np.abs(cv)) >= 1.0:
@@ -86,7 +84,7 @@ def beard_chuang_coefficients(radius_mm):
     (with a warning when the radius is concrete). Differentiable in the radius inside the
     table (piecewise linear)."""
     a = jnp.asarray(radius_mm, jnp.result_type(float))
-    if _concrete(a):
+    if is_concrete(a):
         av = np.asarray(a)
         if av.ndim != 0 or not np.isfinite(av) or av <= 0:
             raise ValueError(f"beard_chuang: radius_mm = {av} must be one finite number > 0")

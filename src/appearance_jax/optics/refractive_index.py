@@ -48,15 +48,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.arrays import is_concrete
 from ..core.params import param, params_class, Real, static, validate
 from ..core.special import safe_div, safe_sqrt
 
 # Relative slack of the eager range check (see the module docstring).
 _RANGE_SLACK = 1e-6
-
-
-def _is_concrete(*xs) -> bool:
-    return not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(xs))
 
 
 def _fmt_range(lo: float, hi: float) -> str:
@@ -84,7 +81,7 @@ class _IndexModel:
 
     def check_wavelengths(self, wavelength_nm) -> None:
         """Eagerly raise ``ValueError`` if concrete wavelengths fall outside the valid range."""
-        if not _is_concrete(wavelength_nm):
+        if not is_concrete(wavelength_nm):
             return
         r = self._range_nm()
         if r is None:
@@ -244,7 +241,7 @@ class Tabulated(_IndexModel):
             )
 
     def _range_nm(self):
-        if not _is_concrete(self.wavelength_nm):
+        if not is_concrete(self.wavelength_nm):
             return None
         wl = np.asarray(self.wavelength_nm, dtype=float)
         return float(wl[0]), float(wl[-1])

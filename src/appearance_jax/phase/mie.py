@@ -53,17 +53,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..core.arrays import is_concrete
 from ..core.model import Model, as_bands, boundary, with_bands
 from ..core.params import Bands, Real, integer, param, params_class, static
-from ..core.rng import uniforms
 from ..core.vec import dot
+from . import binned
 from . import mie_series as S
-from .henyey_greenstein import direction_about
 
 #: bins of the sampling table in mu = cos(theta)
 TABLE_BINS = 1024
-#: weight of the uniform density mixed into the sampling table
-UNIFORM_MIX = 0.01
 _TERMS_QUANTUM = 32
 
 
@@ -93,7 +91,7 @@ class Params:
                                convert=lambda v: None if v is None else integer(1)(v))
 
     def __post_init__(self):
-        if self.terms is None and _concrete(self):
+        if self.terms is None and is_concrete(*(getattr(self, f) for f in type(self)._data_fields)):
             object.__setattr__(self, "terms", terms_for(np.asarray(self.radius_um), np.asarray(self.wavelength_nm),
                                                         np.asarray(self.n_medium)))
 
@@ -110,10 +108,6 @@ class Params:
         if am > S.MAX_INDEX:
             raise ValueError(f"mie.Params: relative index |m| = {am:.6g} is outside the valid range "
                              f"(0, {S.MAX_INDEX}]")
-
-
-def _concrete(p) -> bool:
-    return not any(isinstance(getattr(p, f), jax.core.Tracer) for f in type(p)._data_fields)
 
 
 class Efficiencies(NamedTuple):
@@ -150,36 +144,24 @@ def _amplitudes(p: Params, cos_theta):
     return S.amplitudes(a, b, cos_theta)
 
 
-def _phase(p: Params, cos_theta):
-    a, b, x = _coefficients(p)
+def _phase_of(a, b, x, cos_theta):
     S1, S2 = S.amplitudes(a, b, jnp.clip(cos_theta, -1.0, 1.0))
     _, q_sca, _, _ = S.efficiencies(a, b, x)
     return (jnp.abs(S1) ** 2 + jnp.abs(S2) ** 2) / (2.0 * jnp.pi * x * x * q_sca)
 
 
-def _bin_edges(dtype):
-    # mu = 1 - 2 t^2 on uniform t in [0, 1]: theta ~ 2 t near the forward peak
-    t = jnp.linspace(0.0, 1.0, TABLE_BINS + 1, dtype=dtype)
-    return 1.0 - 2.0 * t * t  # decreasing from 1 to -1
+def _phase(p: Params, cos_theta):
+    return _phase_of(*_coefficients(p), cos_theta)
 
 
-def _table(p: Params):
-    """Bin edges (decreasing mu), bin probabilities and the CDF of the sampling density."""
-    dtype = jnp.result_type(float)
-    edges = _bin_edges(dtype)
-    f = jnp.mean(_phase(p, edges), axis=-1)  # band mean, (bins + 1,)
-    width = edges[:-1] - edges[1:]
-    mass = 2.0 * jnp.pi * 0.5 * (f[:-1] + f[1:]) * width
-    prob = (1.0 - UNIFORM_MIX) * mass / jnp.sum(mass) + UNIFORM_MIX * 0.5 * width
-    cdf = jnp.concatenate([jnp.zeros((1,), dtype), jnp.cumsum(prob)])
-    return edges, prob, cdf / cdf[-1]
-
-
-def _table_pdf(edges, prob, mu):
-    width = edges[:-1] - edges[1:]
-    # bin j holds edges[j] >= mu > edges[j + 1]
-    j = jnp.clip(jnp.searchsorted(-edges, -mu, side="right") - 1, 0, TABLE_BINS - 1)
-    return prob[j] / (2.0 * jnp.pi * width[j])
+def _table(a, b, x):
+    """Bin edges in mu (decreasing, crowded towards the forward peak: mu = 1 - 2 t^2 on uniform
+    t, so theta ~ 2 t there) and bin probabilities of the band-mean phase function."""
+    t = jnp.linspace(0.0, 1.0, TABLE_BINS + 1, dtype=jnp.result_type(float))
+    edges = 1.0 - 2.0 * t * t
+    f = jnp.mean(_phase_of(a, b, x, edges), axis=-1)  # (bins + 1,)
+    mass = 0.5 * (f[:-1] + f[1:]) * (edges[:-1] - edges[1:])
+    return edges, binned.probabilities(mass, edges)
 
 
 def _eval(p: Params, wi, wo):
@@ -187,23 +169,16 @@ def _eval(p: Params, wi, wo):
 
 
 def _pdf(p: Params, wi, wo):
-    edges, prob, _ = _table(p)
-    return _table_pdf(edges, prob, jnp.clip(-dot(wi, wo), -1.0, 1.0))
+    edges, prob = _table(*_coefficients(p))
+    return binned.density(edges, prob, -dot(wi, wo))
 
 
 def _sample(p: Params, wi, u):
-    shape = jnp.shape(wi.z)
-    u1, u2, u3 = uniforms(u, shape, 3)
-    edges, prob, cdf = _table(p)
-    j = jnp.clip(jnp.searchsorted(cdf, u1, side="right") - 1, 0, TABLE_BINS - 1)
-    mu = edges[j] - u2 * (edges[j] - edges[j + 1])
-    mu = jnp.clip(mu, -1.0, 1.0)
-    sin_t = jnp.sqrt(jnp.maximum((1.0 - mu) * (1.0 + mu), 0.0))
-    wo = direction_about(wi, mu, sin_t, 2.0 * jnp.pi * u3)
-    c = jnp.clip(-dot(wi, wo), -1.0, 1.0)  # the cosine eval sees, so weight = f / pdf holds
-    pdf = _table_pdf(edges, prob, c)
-    weight = _phase(p, c) / with_bands(pdf)
-    return wo, weight, pdf
+    a, b, x = _coefficients(p)  # once: the table and the weights share the series
+    edges, prob = _table(a, b, x)
+    wo, c = binned.sample(edges, prob, wi, u)
+    pdf = binned.density(edges, prob, c)
+    return wo, _phase_of(a, b, x, c) / with_bands(pdf), pdf
 
 
 eval = boundary(_eval, Params)

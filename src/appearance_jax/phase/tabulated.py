@@ -35,12 +35,8 @@ import numpy as np
 
 from ..core.model import Model, boundary, with_bands
 from ..core.params import Real, param, params_class
-from ..core.rng import uniforms
 from ..core.vec import dot
-from .henyey_greenstein import direction_about
-
-UNIFORM_MIX = 0.01
-
+from . import binned
 
 @params_class
 class Params:
@@ -96,39 +92,22 @@ def _eval(p: Params, wi, wo):
 
 
 def _sampling(v):
-    """Bin probabilities of the band-mean table (with the uniform mixture) and bin edges in mu."""
-    G = v.shape[0]
-    z, mass = _normaliser(v)
-    prob = jnp.mean(2.0 * jnp.pi * mass / z, axis=-1)
-    edges = jnp.cos(jnp.linspace(0.0, jnp.pi, G, dtype=v.dtype))  # decreasing
-    width = edges[:-1] - edges[1:]
-    prob = (1.0 - UNIFORM_MIX) * prob + UNIFORM_MIX * 0.5 * width
-    return edges, prob / jnp.sum(prob)
-
-
-def _density(edges, prob, cos_t):
-    G = edges.shape[0]
-    theta = jnp.arccos(jnp.clip(cos_t, -1.0, 1.0))
-    j = jnp.clip(jnp.floor(theta * ((G - 1) / jnp.pi)).astype(jnp.int32), 0, G - 2)
-    return prob[j] / (2.0 * jnp.pi * (edges[j] - edges[j + 1]))
+    """Bin edges in mu (the grid's, decreasing) and probabilities of the band-mean table."""
+    _, mass = _normaliser(v)
+    edges = jnp.cos(jnp.linspace(0.0, jnp.pi, v.shape[0], dtype=v.dtype))
+    return edges, binned.probabilities(jnp.mean(mass / jnp.sum(mass, axis=0), axis=-1), edges)
 
 
 def _pdf(p: Params, wi, wo):
     edges, prob = _sampling(_table(p))
-    return _density(edges, prob, -dot(wi, wo))
+    return binned.density(edges, prob, -dot(wi, wo))
 
 
 def _sample(p: Params, wi, u):
     v = _table(p)
-    u1, u2, u3 = uniforms(u, jnp.shape(wi.z), 3)
     edges, prob = _sampling(v)
-    cdf = jnp.concatenate([jnp.zeros((1,), prob.dtype), jnp.cumsum(prob)])
-    j = jnp.clip(jnp.searchsorted(cdf, u1, side="right") - 1, 0, edges.shape[0] - 2)
-    mu = jnp.clip(edges[j] - u2 * (edges[j] - edges[j + 1]), -1.0, 1.0)
-    sin_t = jnp.sqrt(jnp.maximum((1.0 - mu) * (1.0 + mu), 0.0))
-    wo = direction_about(wi, mu, sin_t, 2.0 * jnp.pi * u3)
-    c = -dot(wi, wo)  # the cosine eval sees, so weight = f / pdf holds to rounding
-    pdf = _density(edges, prob, c)
+    wo, c = binned.sample(edges, prob, wi, u)
+    pdf = binned.density(edges, prob, c)
     z, _ = _normaliser(v)
     return wo, _value(v, c) / z / with_bands(pdf), pdf
 
