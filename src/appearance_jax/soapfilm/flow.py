@@ -46,6 +46,7 @@ from .advect import ORDERS, SCHEMES, advect_scalar, advect_velocity
 from .air import Still, on_faces
 from .grid import SphereGrid
 from .thickness import DimensionlessNumbers
+from .transport import advect_step
 
 __all__ = ["FlowParams", "State", "Settings", "Carry", "StepInfo", "FlowError", "Result", "rest_state",
            "start", "step", "simulate", "seconds_to_time", "time_to_seconds", "REASONS"]
@@ -164,10 +165,12 @@ class Carry(NamedTuple):
     n: jax.Array
     reason: jax.Array  # index into REASONS; 0 while running
     stop_step: jax.Array  # the step that failed (-1 while running)
+    last: "StepInfo"  # diagnostics of the last step tried (the failing one after a failure)
 
 
 class StepInfo(NamedTuple):
-    """Per-step diagnostics."""
+    """Diagnostics of a step (in :class:`Result` per frame: the largest iteration count and
+    residual over the frame's steps, the distortion and re-initialisation count at its end)."""
 
     cg_iterations: jax.Array
     cg_residual: jax.Array
@@ -216,22 +219,29 @@ def start(grid: SphereGrid, state: State, settings: Settings = Settings(), t0=0.
     state = State(*(jnp.asarray(a) for a in state))
     dtype = state.eta.dtype
     maps = _bimocq.init(grid, jnp.stack([state.eta, state.gamma / state.eta])) if settings.bimocq else None
-    return Carry(state, maps, jnp.asarray(t0, dtype), jnp.zeros((), jnp.int32), jnp.zeros((), jnp.int32),
-                 jnp.full((), -1, jnp.int32))
+    zero_i, zero_f = jnp.zeros((), jnp.int32), jnp.zeros((), dtype)
+    return Carry(state, maps, jnp.asarray(t0, dtype), zero_i, zero_i, jnp.full((), -1, jnp.int32),
+                 StepInfo(zero_i, zero_f, zero_f, zero_i))
 
 
-def _advance(grid, params, carry: Carry, dt, air, settings: Settings):
+def _advance(grid, params, carry: Carry, dt, air, settings: Settings, solve):
     s = carry.state
     o, sch = settings.order, settings.scheme
     maps = carry.maps
+    if sch == "great_circle":  # every trajectory in one pass (one compiled copy)
+        ut_s, up_s, fields, maps = advect_step(grid, s.u_theta, s.u_phi, jnp.stack([s.eta, s.gamma]), maps, dt, o)
+        if maps is None:
+            eta_s, gamma_s = fields
+    else:  # the latlong baseline
+        if maps is not None:
+            maps = _bimocq.advance(grid, maps, s.u_theta, s.u_phi, dt, o)
+        else:
+            eta_s = advect_scalar(grid, s.eta, s.u_theta, s.u_phi, dt, o, sch)
+            gamma_s = advect_scalar(grid, s.gamma, s.u_theta, s.u_phi, dt, o, sch)
+        ut_s, up_s = advect_velocity(grid, s.u_theta, s.u_phi, dt, o, sch)
     if maps is not None:
-        maps = _bimocq.advance(grid, maps, s.u_theta, s.u_phi, dt, o)
         eta_s, ratio_s = _bimocq.values(grid, maps, settings.error_correction)
         gamma_s = ratio_s * eta_s
-    else:
-        eta_s = advect_scalar(grid, s.eta, s.u_theta, s.u_phi, dt, o, sch)
-        gamma_s = advect_scalar(grid, s.gamma, s.u_theta, s.u_phi, dt, o, sch)
-    ut_s, up_s = advect_velocity(grid, s.u_theta, s.u_phi, dt, o, sch)
     dtype = eta_s.dtype
     air_t, air_p = on_faces(grid, air, carry.t + dt, dtype)
     M, Cr, g = (jnp.asarray(v, dtype) for v in (params.M, params.Cr, params.g))
@@ -243,7 +253,7 @@ def _advance(grid, params, carry: Carry, dt, air, settings: Settings):
         inv_diag = 1.0 / _conc.diagonal(grid, faces, gamma_s, dt)
         precond = lambda r: inv_diag * r  # noqa: E731
     gamma_cg, info = _conc.cg(lambda x: _conc.apply(grid, faces, gamma_s, dt, x), b, gamma_s, precond,
-                              settings.rtol(dtype), int(settings.cg_max_iter))
+                              *solve)
     u_theta, u_phi = _conc.project(grid, faces, gamma_cg)
     shrink = 1.0 - dt * grid.divergence(u_theta, u_phi)
     eta = eta_s * shrink - jnp.asarray(params.evaporation, dtype) * dt
@@ -256,13 +266,17 @@ def _advance(grid, params, carry: Carry, dt, air, settings: Settings):
         extra = (maps.last_distortion, maps.n_reinit)
     else:
         extra = (jnp.zeros((), dtype), jnp.zeros((), jnp.int32))
-    return new, maps, StepInfo(info.iterations, info.residual, *extra), settings.rtol(dtype)
+    return new, maps, StepInfo(info.iterations, info.residual, *extra), solve[0]
 
 
-def step(grid: SphereGrid, params: FlowParams, carry: Carry, dt, air=Still(), settings: Settings = Settings()):
+def step(grid: SphereGrid, params: FlowParams, carry: Carry, dt, air=Still(), settings: Settings = Settings(),
+         solve=None):
     """One time step of ``dt`` (dimensionless). Returns ``(carry, StepInfo)``; a failing step
-    leaves the state unchanged and records the reason (see :data:`REASONS`) and the step."""
-    new, maps, info, rtol = _advance(grid, params, carry, dt, air, settings)
+    leaves the state unchanged and records the reason (see :data:`REASONS`) and the step.
+    ``solve = (rtol, max_iter)`` overrides the settings' (they may be traced)."""
+    if solve is None:
+        solve = (settings.rtol(carry.state.eta.dtype), int(settings.cg_max_iter))
+    new, maps, info, rtol = _advance(grid, params, carry, dt, air, settings, solve)
     finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in new]))
     solved = info.cg_residual <= rtol
     wet = jnp.min(new.eta) > 0
@@ -272,7 +286,8 @@ def step(grid: SphereGrid, params: FlowParams, carry: Carry, dt, air=Still(), se
     keep = lambda a, b: jax.tree_util.tree_map(lambda x, y: jnp.where(ok, x, y), a, b)  # noqa: E731
     out = Carry(keep(new, carry.state), keep(maps, carry.maps) if maps is not None else None,
                 jnp.where(ok, carry.t + dt, carry.t), carry.n + ok.astype(jnp.int32),
-                jnp.where(running, reason, carry.reason), jnp.where(running & (reason != 0), carry.n, carry.stop_step))
+                jnp.where(running, reason, carry.reason), jnp.where(running & (reason != 0), carry.n, carry.stop_step),
+                jax.tree_util.tree_map(lambda x, y: jnp.where(running, x, y), info, carry.last))
     return out, info
 
 
@@ -283,7 +298,8 @@ class Result(NamedTuple):
         carry: the final :class:`Carry` (``carry.state`` the fields, ``carry.t`` the time).
         frames: the half thickness eta every ``every`` steps, ``(n_frames, n_theta, n_phi)``.
         frame_times: their dimensionless times.
-        info: :class:`StepInfo` per step (arrays of length ``n_steps``).
+        info: :class:`StepInfo` per frame (arrays of length ``n_frames``: the largest iteration
+            count and residual of the frame's steps, distortion and re-initialisations at its end).
         stopped: None, or a sentence saying why and at which step the run stopped early.
     """
 
@@ -294,17 +310,23 @@ class Result(NamedTuple):
     stopped: str | None
 
 
-@functools.partial(jax.jit, static_argnames=("grid", "n_frames", "every", "air", "settings"))
-def _run(carry, params, dt, *, grid, n_frames, every, air, settings):
-    def inner(c, _):
-        return step(grid, params, c, dt, air, settings)
+@functools.partial(jax.jit, static_argnames=("grid", "n_frames", "air", "settings"))
+def _run(carry, params, dt, every, solve, *, grid, n_frames, air, settings):
+    # ``every`` is a traced loop bound (a while loop, not a scan) and the solve's tolerance and
+    # iteration limit are traced too: runs of any length with the same number of frames share
+    # one compiled program
+    def inner(_, c):
+        c, it_max, res_max = c
+        c, info = step(grid, params, c, dt, air, settings, solve)
+        return c, jnp.maximum(it_max, info.cg_iterations), jnp.maximum(res_max, info.cg_residual)
 
     def outer(c, _):
-        c, info = jax.lax.scan(inner, c, None, length=every)
+        zero_i, zero_f = jnp.zeros((), jnp.int32), jnp.zeros((), c.t.dtype)
+        c, it_max, res_max = jax.lax.fori_loop(0, every, inner, (c, zero_i, zero_f))
+        info = StepInfo(it_max, res_max, c.last.distortion, c.last.n_reinit)
         return c, (c.state.eta, c.t, info)
 
     carry, (frames, times, info) = jax.lax.scan(outer, carry, None, length=n_frames)
-    info = jax.tree_util.tree_map(lambda a: a.reshape((-1,) + a.shape[2:]), info)
     return carry, frames, times, info
 
 
@@ -336,9 +358,12 @@ def simulate(grid: SphereGrid, params: FlowParams, state: State, dt, n_steps: in
         raise ValueError(f"every = {every}: must divide n_steps = {n_steps}")
     if carry is None:
         carry = start(grid, state, settings)
-    n0 = int(carry.n)
-    carry, frames, times, info = _run(carry, params, jnp.asarray(dt, carry.state.eta.dtype), grid=grid,
-                                      n_frames=n_steps // every, every=every, air=air, settings=settings)
+    dtype = carry.state.eta.dtype
+    solve = (jnp.asarray(settings.rtol(dtype), dtype), jnp.asarray(int(settings.cg_max_iter), jnp.int32))
+    static = dataclasses.replace(settings, cg_rtol=None, cg_max_iter=1)  # the traced values above
+    carry, frames, times, info = _run(carry, params, jnp.asarray(dt, carry.state.eta.dtype),
+                                      jnp.asarray(every, jnp.int32), solve, grid=grid, n_frames=n_steps // every,
+                                      air=air, settings=static)
     reason = int(carry.reason)
     stopped = None
     if reason:
@@ -347,10 +372,9 @@ def simulate(grid: SphereGrid, params: FlowParams, state: State, dt, n_steps: in
         if reason == 1:
             stopped = f"the film evaporated (eta <= 0 somewhere) at {where}; the state is the last one before it"
         else:
-            i = min(max(k - n0, 0), n_steps - 1)  # this call's index of the failing step
-            res = float(np.asarray(info.cg_residual)[i])
-            raise FlowError(f"{REASONS[reason]} at {where}: cg residual {res:.3g} after "
-                            f"{int(np.asarray(info.cg_iterations)[i])} iterations (rtol "
+            last = carry.last
+            raise FlowError(f"{REASONS[reason]} at {where}: cg residual {float(last.cg_residual):.3g} after "
+                            f"{int(last.cg_iterations)} iterations (rtol "
                             f"{settings.rtol(carry.state.eta.dtype):.3g}); the state was frozen before it")
     return Result(carry, frames, times, info, stopped)
 
