@@ -1,8 +1,8 @@
 """The argument parser of ``appearance-jax``: top-level help, ``--version`` and one subparser per
 command module.
 
-A command module (``models_cmd``, ``eval_cmd``, ``fit_cmd``, ``demo_cmd`` here, or a module of
-another package with the same interface) provides ``add_parser(subparsers)``, which adds its
+A command module (``models_cmd``, ``eval_cmd``, ``fit_cmd``, ``demo_cmd``, ``bubble_cmd`` here, or a
+module of another package with the same interface) provides ``add_parser(subparsers)``, which adds its
 subparser and sets ``fn=run`` as its default, and ``run(args) -> int`` (the exit code); it may
 raise ``ValueError`` for bad input (exit 2, one error line). To add a command, import its module
 here and append it to :data:`COMMANDS`.
@@ -13,18 +13,19 @@ from __future__ import annotations
 import argparse
 
 from ..export import cli as export_cmd
-from . import demo_cmd, eval_cmd, fit_cmd, models_cmd
+from . import bubble_cmd, demo_cmd, eval_cmd, fit_cmd, models_cmd
 from .checks import EXIT_CODES
 
 #: the command modules, in the order of the help text
-COMMANDS = [models_cmd, eval_cmd, fit_cmd, export_cmd, demo_cmd]
+COMMANDS = [models_cmd, eval_cmd, fit_cmd, export_cmd, demo_cmd, bubble_cmd]
 
 DESCRIPTION = """\
 appearance-jax: differentiable BSDF models and a fitting pipeline for measured reflectance.
 
 Commands: models (parameter tables), eval (a BSDF on an in-plane grid or at a
 table's directions), fit (a BSDF to a table, with a report), export (a fit's
-params.json as a Mitsuba 3 BSDF), demo. Angles are in
+params.json as a Mitsuba 3 BSDF), demo, bubble-sim (soap-film flow on a
+bubble, Huang 2022 Ch. 3: thickness maps and rendered frames). Angles are in
 degrees on the command line; in-plane tables use a signed theta_o (theta_o =
 theta_i is the mirror direction, -theta_i retro-reflection). A TABLE is a .csv
 file (appearance-jax table v1), a MERL .binary file or proxy:NAME[:GRID] (a
