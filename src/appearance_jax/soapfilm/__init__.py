@@ -6,6 +6,11 @@
   :func:`render`.
 * :mod:`.thickness`: thickness fields -- the gravity equilibrium (Huang Eq. 3.36), Huang Table 3.2's
   dimensionless numbers, equirectangular maps, and field callables for the shader.
+* the film flow of Huang Secs. 3.3-3.4 (docs/soapfilm_flow.md): :mod:`.grid` (the staggered
+  spherical grid), :mod:`.advect` (great-circle semi-Lagrangian advection), :mod:`.bimocq`
+  (BiMocq^2 maps), :mod:`.concentration` (the implicit surfactant solve, App. C), :mod:`.air`
+  (air velocities, noise), :mod:`.transport` (one step's advection in one pass) and :mod:`.flow`
+  (``simulate``).
 
 Units: film thicknesses passed to the shader are the **full** thickness d = 2 eta in nm
 (the thesis' eta is the half thickness); wavelengths in nm; world +z is up.
@@ -35,3 +40,15 @@ from .thickness import (  # noqa: F401
     latlong_thickness,
     uniform_field,
 )
+from .air import CurlNoise, Rotating, Still  # noqa: F401
+from .flow import (  # noqa: F401
+    FlowError,
+    FlowParams,
+    Settings,
+    State,
+    rest_state,
+    seconds_to_time,
+    simulate,
+    time_to_seconds,
+)
+from .grid import SphereGrid  # noqa: F401
