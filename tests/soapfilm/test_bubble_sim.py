@@ -107,6 +107,8 @@ def test_scene_bad_input():
             scenes.build("gravity", GRID, **kw)
     with pytest.raises(ValueError, match="air"):
         scenes.air_field("wind")
+    with pytest.raises(ValueError, match="width"):
+        scenes.Swirl(width=0.0)
     with pytest.raises(ValueError, match="blow_start"):
         scenes.air_field("blow", blow_start=1.0, blow_stop=0.5)
 

@@ -43,15 +43,15 @@ default R shows the effect (constants below, all dimensionless unless stated):
   -M grad(ln eta) fills the patches instead, and they vanish within 0.1 s (seen at 64x128).
 * ``evaporate``: eta = 1 + 0.15 noise (frequency 6, :func:`~appearance_jax.soapfilm.air.noise`),
   curl-noise air of amplitude 0.3 U, frequency 4, and evaporation ``EVAPORATION`` = 0.01 eta_0
-  per R/U (100 nm/s of half thickness at the defaults): the film loses 0.4 eta_0 in 2 s, so
-  its thin top goes grey, and eta reaches 0 somewhere after roughly 2-3 s.
+  per R/U (100 nm/s of half thickness at the defaults): the film loses 0.4 eta_0 in 2 s; the
+  thinnest parts (the top, and the centres of the air's vortices, which thin fastest) go
+  grey, and eta reaches 0 somewhere after roughly 2-3 s (2.7 s at 64x128).
 """
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import dataclasses
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -115,12 +115,17 @@ class Swirl(Rotating):
     angular speed falls off away from the axis, u_air = omega(t) exp(-(1 - a.p) / width) a x p.
 
     Each circle about ``a`` turns at its own rate (a differential rotation: tangent and
-    divergence-free), so the film is sheared and its thickness drawn into thin stripes; a
+    divergence-free), so the film is sheared and its thickness wound into rings and stripes; a
     rigid rotation (``width`` = inf) only carries the film round. ``width``: the fall-off in
     1 - cos(angle from the axis) (0.15: 37 % of the axis' angular speed at 0.55 rad, 5 % at 1 rad).
     """
 
     width: float = 0.15
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.width > 0:  # inf allowed (rigid rotation)
+            raise ValueError(f"width = {self.width!r}: must be > 0")
 
     def __call__(self, p: Vec3, t) -> Vec3:
         a = Vec3(*(jnp.asarray(c, p.x.dtype) for c in self.axis))
