@@ -39,7 +39,7 @@ import numpy as np
 
 from ..core.vec import Vec3, dot
 from .advect import backtrace, departure_points
-from .grid import SphereGrid, angles, point
+from .grid import SphereGrid, angles, cell_weights, point
 
 __all__ = ["Maps", "init", "advance", "values", "thickness", "accumulate", "distortion", "reinit_if_distorted",
            "DEFAULT_THRESHOLD"]
@@ -89,21 +89,9 @@ def _slerp(a: Vec3, b: Vec3, t) -> Vec3:
 def sample_points(grid: SphereGrid, P: Vec3, theta, phi) -> Vec3:
     """Bilinear-slerp lookup of the unit-vector field ``P`` (cell-centred) at ``(theta, phi)``.
     Positions are basis-free, so rows across a pole are read without a sign change."""
-    h = grid.n_phi // 2
-
-    def pad(f):
-        return jnp.concatenate([jnp.roll(f[0], -h)[None], f, jnp.roll(f[-1], -h)[None]], axis=0)
-
-    Q = Vec3(*(pad(c) for c in P))
-    n_rows = grid.n_theta + 2
-    r = jnp.clip(theta / grid.dtheta + 0.5, 0.0, n_rows - 1.0)
-    i0 = jnp.clip(jnp.floor(r), 0, n_rows - 2).astype(jnp.int32)
-    fr = r - i0
-    c = phi / grid.dphi - 0.5
-    cf = jnp.floor(c)
-    fc = c - cf
-    j0 = jnp.mod(cf.astype(jnp.int32), grid.n_phi)
-    j1 = jnp.mod(j0 + 1, grid.n_phi)
+    Q = Vec3(*(grid.pad_rows(c, 1.0) for c in P))
+    i0, j0, j1, fr, fc = cell_weights(grid.n_theta + 2, grid.n_phi, theta / grid.dtheta + 0.5,
+                                      phi / grid.dphi - 0.5)
 
     def at(i, j):
         return Vec3(*(q[i, j] for q in Q))
@@ -156,13 +144,8 @@ def _value(grid, maps, k, error_correction):
 
 def _neighbour_range(grid, f, theta, phi):
     """min and max of the four cells a bilinear lookup at (theta, phi) reads."""
-    h = grid.n_phi // 2
-    P = jnp.concatenate([jnp.roll(f[0], -h)[None], f, jnp.roll(f[-1], -h)[None]], axis=0)
-    n_rows = grid.n_theta + 2
-    r = jnp.clip(theta / grid.dtheta + 0.5, 0.0, n_rows - 1.0)
-    i0 = jnp.clip(jnp.floor(r), 0, n_rows - 2).astype(jnp.int32)
-    j0 = jnp.mod(jnp.floor(phi / grid.dphi - 0.5).astype(jnp.int32), grid.n_phi)
-    j1 = jnp.mod(j0 + 1, grid.n_phi)
+    P = grid.pad_rows(f, 1.0)
+    i0, j0, j1, _, _ = cell_weights(grid.n_theta + 2, grid.n_phi, theta / grid.dtheta + 0.5, phi / grid.dphi - 0.5)
     v = jnp.stack([P[i0, j0], P[i0, j1], P[i0 + 1, j0], P[i0 + 1, j1]])
     return v.min(axis=0), v.max(axis=0)
 
