@@ -139,8 +139,8 @@ def test_bubble_sim_end_to_end(tmp_path, capsys):
     assert s["dt_seconds"] == 0.002 and s["dt"] == pytest.approx(0.04)
     assert s["simulated_seconds"] == pytest.approx(0.02, rel=1e-5)
     assert s["wall_seconds"] > 0 and s["simulate_seconds"] > 0
-    for q in ("eta", "gamma"):
-        assert math.isfinite(s["relative_drift"][q]) and abs(s["relative_drift"][q]) < 1e-3
+    for q in ("eta", "gamma", "scheme_eta", "scheme_gamma"):
+        assert math.isfinite(s["relative_drift"][q]) and abs(s["relative_drift"][q]) < 1e-3, q
     assert s["cg"]["max_iterations"] > 0
     assert 0 <= s["cg"]["final_residual"] <= s["cg"]["max_residual"] <= s["cg"]["rtol"]
     assert isinstance(s["n_reinit"], int) and s["n_reinit"] >= 0

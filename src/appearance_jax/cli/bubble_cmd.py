@@ -183,6 +183,18 @@ def _write_sheet(path, frames, vmax, out):
 
 
 # ------------------------------------------------------------------------- run
+def _scheme_drift(carry) -> dict:
+    """``scheme_eta``/``scheme_gamma``: the relative change of the integrals made by the scheme
+    itself (``Carry.drift_log``), and whether flow rescaled it away (``conserved``)."""
+    from ..soapfilm import flow
+
+    log = getattr(carry, "drift_log", None)
+    if log is None:
+        return {}
+    e, g = (float(np.expm1(v)) for v in np.asarray(log, np.float64))
+    return {"scheme_eta": e, "scheme_gamma": g, "conserved": bool(getattr(flow.Settings(), "conserve", False))}
+
+
 def run(args) -> int:
     o = _options(args)
     import jax
@@ -304,6 +316,8 @@ def run(args) -> int:
             "gamma": (integrals[1] - integrals0[1]) / integrals0[1],
             # uniform evaporation removes rate * t from eta everywhere (the one non-conservative term)
             "eta_expected_from_evaporation": 0.0 - float(scene.params.evaporation) * t_end * area / integrals0[0],
+            # the scheme's own drift, before flow's conserving rescale (Settings.conserve) removes it
+            **_scheme_drift(carry),
         },
         "integrals": {"eta_start": integrals0[0], "eta_end": integrals[0], "gamma_start": integrals0[1],
                       "gamma_end": integrals[1]},
