@@ -89,13 +89,13 @@ def _waves(seed: int, n_waves: int, frequency: float):
 def _potential(waves, p: Vec3, t=0.0, speed=0.0):
     """psi(p) and grad psi (in R^3) of the plane-wave sum."""
     k, phase, amp = (np.asarray(a) for a in waves)
-    dtype = p.x.dtype
     psi = jnp.zeros_like(p.x)
     grad = Vec3(psi, psi, psi)
     for kk, c, a in zip(k, phase, amp):
-        arg = kk[0] * p.x + kk[1] * p.y + kk[2] * p.z + jnp.asarray(c, dtype) + speed * t
+        kk, c, a = [float(x) for x in kk], float(c), float(a)  # Python floats: keep p's dtype
+        arg = kk[0] * p.x + kk[1] * p.y + kk[2] * p.z + c + speed * t
         psi = psi + a * jnp.sin(arg)
-        grad = grad + Vec3(*(jnp.asarray(a * kc, dtype) * jnp.cos(arg) for kc in kk))
+        grad = grad + Vec3(*(a * kc * jnp.cos(arg) for kc in kk))
     return psi, grad
 
 
@@ -134,7 +134,7 @@ def noise(p: Vec3, seed: int = 0, frequency: float = 6.0, n_waves: int = 32):
     """A smooth random scalar field on the sphere with zero mean and unit r.m.s. (approximately),
     for initial thickness perturbations (the thesis' Perlin noise, Huang Fig. 3.17)."""
     psi, _ = _potential(_waves(int(seed), int(n_waves), float(frequency)), p)
-    return psi * np.sqrt(2.0)
+    return psi * float(np.sqrt(2.0))
 
 
 def make_air(kind: str, **kw):

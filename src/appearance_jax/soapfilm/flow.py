@@ -25,9 +25,10 @@ One :func:`step` (operator splitting, Huang Sec. 3.4):
 3. evaporation: eta -= ``evaporation`` dt (Huang Sec. 3.6.4).
 
 :func:`simulate` runs steps in a ``lax.scan``. A step that fails -- the solve did not reach its
-tolerance, the state is not finite, or the film evaporated to eta <= 0 somewhere -- freezes the
-state; the host then raises :class:`FlowError` naming the step (solve, NaN) or returns with
-``stopped`` set (evaporation: the thesis ends its simulation there, [T:898]).
+tolerance, the state is not finite, or eta <= 0 somewhere -- freezes the state; the host then
+raises :class:`FlowError` naming the step (solve, NaN, eta <= 0 without evaporation: a step too
+large) or returns with ``stopped`` set (evaporation to zero: the thesis ends its simulation
+there, [T:898]).
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ __all__ = ["FlowParams", "State", "Settings", "Carry", "StepInfo", "FlowError", 
            "start", "step", "simulate", "seconds_to_time", "time_to_seconds", "REASONS"]
 
 #: why a run stopped (``Carry.reason``)
-REASONS = ("running", "evaporated", "solve did not converge", "non-finite state")
+REASONS = ("running", "eta <= 0", "solve did not converge", "non-finite state")
 
 
 class FlowError(RuntimeError):
@@ -394,8 +395,11 @@ def simulate(grid: SphereGrid, params: FlowParams, state: State, dt, n_steps: in
     if reason:
         k = int(carry.stop_step)
         where = f"step {k} (t = {float(carry.t):.6g})"
-        if reason == 1:
+        if reason == 1 and params.evaporation > 0:
             stopped = f"the film evaporated (eta <= 0 somewhere) at {where}; the state is the last one before it"
+        elif reason == 1:  # no evaporation: the explicit update eta* (1 - dt div u) crossed zero
+            raise FlowError(f"the thickness reached 0 without evaporation at {where}: dt * div u >= 1 somewhere; "
+                            "reduce dt (the state was frozen before it)")
         else:
             last = carry.last
             raise FlowError(f"{REASONS[reason]} at {where}: cg residual {float(last.cg_residual):.3g} after "

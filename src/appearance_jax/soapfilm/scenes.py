@@ -34,9 +34,10 @@ default R shows the effect (constants below, all dimensionless unless stated):
   axis, times exp(-(1 - cos angle) / ``BLOW_WIDTH``), ``BLOW_WIDTH`` = 0.15 (the air is fastest,
   0.92 m/s, 0.38 rad from the axis), on from ``BLOW_START`` = 0.25 s (ramped over 0.5 R/U = 25 ms)
   to ``BLOW_STOP`` = inf. A rigid rotation of all the air only carries the film round; the shear
-  of a localised swirl is what draws stripes. The air does not stop by default: in runs where it
-  stops (finite ``blow_stop``), the present solver's pole rows go unstable 0.1-0.4 s later
-  (diverging divergence at the pole rows, then an unconverged solve).
+  of a localised swirl is what draws stripes. The air does not stop by default; a finite
+  ``blow_stop`` lets the film spin down (with BiMocq^2
+  distortion measured on the sphere such runs went unstable in the pole rows; measured in grid
+  cells, as now, they settle: docs/soapfilm_flow.md).
 * ``islands``: ``ISLANDS`` = 7 Gaussian patches (angular radius 0.12-0.25 rad) centred at
   theta in [0.65 pi, 0.92 pi], each thinning the film by 40-65 %, shaped by a 10 % noise.
   Gamma is not thinned with eta: with Gamma = eta (Gamma / eta = 1) the Marangoni flow
