@@ -4,9 +4,10 @@ iterations and peak memory, per grid.
 There is no peer program to run: the reference is the thesis' 1.1 s per step at 1024 x 2048 on a
 GTX 1080 (CUDA + AmgX, 16-17 CG iterations, 75 % forces/divergence, 25 % advection; Huang
 Sec. 3.4.4, [T:730-734]). The scene is the CLI's "blow" set-up (Table 3.2 numbers, a rotating
-ball of air), dt = 0.002 s on a 5 cm bubble (0.04 dimensionless), float32.
+ball of air), dt = 0.002 s on a 5 cm bubble (0.04 dimensionless); by default the CLI's precision:
+float32 state (advection, maps) and a float64 solve.
 
-    python3 benchmarks/soapfilm_flow.py [--grids 128x256,256x512] [--steps 40] [--float64]
+    python3 benchmarks/soapfilm_flow.py [--grids 128x256,256x512] [--steps 40] [--state float64] [--solve float32]
 """
 
 from __future__ import annotations
@@ -24,16 +25,20 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grids", default="128x256,256x512")
     ap.add_argument("--steps", type=int, default=40)
-    ap.add_argument("--float64", action="store_true")
+    ap.add_argument("--state", choices=("float32", "float64"), default="float32")
+    ap.add_argument("--solve", choices=("float32", "float64"), default="float64")
     args = ap.parse_args()
-    if args.float64:
+    if "float64" in (args.state, args.solve):
         jax.config.update("jax_enable_x64", True)
+    if args.solve == "float32" and args.state == "float64":
+        ap.error("--solve float32 needs --state float32")
     from appearance_jax.soapfilm import air, concentration as C, flow
     from appearance_jax.soapfilm.grid import SphereGrid
     from appearance_jax.soapfilm.transport import advect_step
 
-    dtype = jnp.float64 if args.float64 else jnp.float32
-    print(f"device: {jax.devices()[0].device_kind} ({jax.default_backend()}), dtype {jnp.dtype(dtype).name}")
+    dtype = jnp.dtype(args.state)
+    wd = jnp.dtype(args.solve)
+    print(f"device: {jax.devices()[0].device_kind} ({jax.default_backend()}), state {dtype.name}, solve {wd.name}")
     print(f"{'grid':>10} {'compile s':>9} {'s/step':>8} {'steps/s':>8} {'advect s':>9} {'solve s':>8} "
           f"{'cg it (max)':>11} {'reinit':>6} {'maxrss MB':>9}")
     for text in args.grids.split(","):
@@ -61,6 +66,7 @@ def main():
         jax.block_until_ready(out)
 
         def solve(s):
+            s = type(s)(*(a.astype(wd) for a in s))
             z_t, z_p = jnp.zeros_like(s.u_theta), jnp.zeros_like(s.u_phi)
             faces = C.face_terms(grid, s.eta, s.u_theta, s.u_phi, z_t, z_p, 0.83, 2.1, 0.49, 0.04)
             P = C.row_mean_preconditioner(grid, faces, s.gamma, 0.04)

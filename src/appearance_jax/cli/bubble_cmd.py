@@ -63,7 +63,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--render-size", type=int, default=256, metavar="PX",
                    help="rendered PNG size in pixels (default 256; 0 = no rendered PNGs)")
     p.add_argument("--seed", type=int, default=0, help="seed of the scene's noise (default 0)")
-    p.add_argument("--float64", action="store_true", help="simulate in double precision")
+    p.add_argument("--float64", action="store_true",
+                   help="keep the state (advection, BiMocq maps) in double precision too (the surfactant solve "
+                        "always runs in double)")
     p.add_argument("--out", default="out/bubble", metavar="DIR", help="output folder (default out/bubble)")
     p.set_defaults(fn=run)
 
@@ -199,8 +201,10 @@ def run(args) -> int:
     o = _options(args)
     import jax
 
-    if args.float64:
-        jax.config.update("jax_enable_x64", True)
+    # x64 on in any case: the surfactant solve runs in float64 (flow.Settings.solve_dtype "auto";
+    # a float32 solve is unstable in the pole rows from ~512 x 1024 on); --float64 makes the
+    # state (advection, maps) double too
+    jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
 
     from ..soapfilm import flow, scenes
@@ -301,7 +305,8 @@ def run(args) -> int:
     summary = {
         "scene": o["scene"], "air": o["air"], "description": description,
         "grid": f"{grid.n_theta}x{grid.n_phi}", "n_theta": grid.n_theta, "n_phi": grid.n_phi,
-        "dtype": "float64" if args.float64 else "float32", "device": jax.devices()[0].platform,
+        "dtype": "float64" if args.float64 else "float32", "solve_dtype": "float64",
+        "device": jax.devices()[0].platform,
         "steps": int(carry.n), "steps_requested": n_steps,
         "dt_seconds": o["dt_seconds"], "dt": dt,
         "seconds_requested": o["seconds"], "simulated_seconds": float(flow.time_to_seconds(t_end, R)),

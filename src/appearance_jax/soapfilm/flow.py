@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 from typing import NamedTuple
 
 import jax
@@ -121,8 +122,9 @@ class Settings:
         bimocq: read eta through BiMocq^2 maps (default) or advect it like Gamma.
         error_correction: BiMocq^2's back-and-forth correction (off by default).
         reinit_threshold: map distortion (rad) that triggers a re-initialisation (pi / 128).
-        cg_rtol: relative residual at which the solve stops (default 1e-6 in float32, 1e-10 in
-            float64); a step whose solve ends above it fails.
+        cg_rtol: relative residual at which the solve stops (default: 1e-6 for a float32 state,
+            1e-10 for a float64 one, whatever the solve's dtype); a step whose solve ends above it
+            fails.
         cg_max_iter: iteration limit of the solve.
         preconditioner: "fft" (exact inverse of the row-averaged operator, default) or "jacobi".
         conserve: rescale eta and Gamma after each step so that their integrals keep the values
@@ -133,6 +135,13 @@ class Settings:
             (BiMocq^2; plain semi-Lagrangian +151 % and +78 %) -- so the default removes it with
             one global factor per field and step. ``False`` runs the thesis' scheme as printed.
             Either way the scheme's own drift is reported (``Carry.drift_log``).
+        solve_dtype: precision of the solve and the updates after it: "auto" (float64 when JAX's
+            x64 mode is on, else the state's), "state", or "float64" (needs x64). Why: in the pole
+            rows the velocity is Gamma's azimuthal difference over sin(theta) dphi ~ dtheta^2, so
+            float32 rounding of Gamma (6e-8) becomes velocity noise that grows with the grid: a
+            float32 solve blew up at the south pole row in 3 steps at 512 x 1024 (float64 ran),
+            and 256 x 512 is the largest float32 grid we ran without it. Advection stays in the
+            state's dtype.
     """
 
     order: int = 2
@@ -144,6 +153,7 @@ class Settings:
     cg_max_iter: int = 2000
     preconditioner: str = "fft"
     conserve: bool = True
+    solve_dtype: str = "auto"
 
     def __post_init__(self):
         if self.order not in ORDERS:
@@ -154,10 +164,21 @@ class Settings:
             raise ValueError(f"reinit_threshold = {self.reinit_threshold!r}: must be > 0")
         if self.cg_rtol is not None and not (0 < self.cg_rtol < 1):
             raise ValueError(f"cg_rtol = {self.cg_rtol!r}: must be in (0, 1)")
+        if self.solve_dtype not in ("auto", "state", "float64"):
+            raise ValueError(f"solve_dtype = {self.solve_dtype!r}: must be 'auto', 'state' or 'float64'")
         if self.preconditioner not in _conc.PRECONDITIONERS:
             raise ValueError(f"preconditioner = {self.preconditioner!r}: must be one of {_conc.PRECONDITIONERS}")
         if int(self.cg_max_iter) < 1:
             raise ValueError(f"cg_max_iter = {self.cg_max_iter!r}: must be >= 1")
+
+    def working_dtype(self, state_dtype):
+        """The dtype of the solve and the updates (see ``solve_dtype``)."""
+        x64 = bool(jax.config.read("jax_enable_x64"))
+        if self.solve_dtype == "float64" or (self.solve_dtype == "auto" and x64):
+            if not x64:
+                raise ValueError("solve_dtype = 'float64' needs jax_enable_x64 (jax.config.update('jax_enable_x64', True))")
+            return jnp.float64
+        return jnp.dtype(state_dtype)
 
     def rtol(self, dtype) -> float:
         if self.cg_rtol is not None:
@@ -255,7 +276,9 @@ def _advance(grid, params, carry: Carry, dt, air, settings: Settings, solve):
     if maps is not None:
         eta_s, ratio_s = _bimocq.values(grid, maps, settings.error_correction)
         gamma_s = ratio_s * eta_s
-    dtype = eta_s.dtype
+    state_dtype = s.eta.dtype
+    dtype = settings.working_dtype(state_dtype)
+    eta_s, gamma_s, ut_s, up_s = (a.astype(dtype) for a in (eta_s, gamma_s, ut_s, up_s))
     air_t, air_p = on_faces(grid, air, carry.t + dt, dtype)
     M, Cr, g = (jnp.asarray(v, dtype) for v in (params.M, params.Cr, params.g))
     faces = _conc.face_terms(grid, eta_s, ut_s, up_s, air_t, air_p, M, Cr, g, dt)
@@ -276,21 +299,24 @@ def _advance(grid, params, carry: Carry, dt, air, settings: Settings, solve):
     # conserves (less evaporation's exact loss), drift by the step's discretisation error;
     # measure that, and remove it with one global factor each when asked
     area = grid.integral(jnp.ones_like(eta))
-    want = jnp.stack([grid.integral(s.eta) - evaporated * area, grid.integral(s.gamma)])
+    want = jnp.stack([grid.integral(s.eta.astype(dtype)) - evaporated * area, grid.integral(s.gamma.astype(dtype))])
     have = jnp.stack([grid.integral(eta), grid.integral(gamma)])
     change = have / want
     conserve = solve[2]  # traced: both choices share one program
     eta = jnp.where(conserve, eta / change[0], eta)
     gamma = jnp.where(conserve, gamma / change[1], gamma)
-    new = State(u_theta, u_phi, eta, gamma)
+    new = State(*(a.astype(state_dtype) for a in (u_theta, u_phi, eta, gamma)))
     if maps is not None:
         ratio = gamma / eta
-        maps = _bimocq.accumulate(grid, maps, jnp.stack([eta - eta_s, ratio - ratio_s]))
-        maps = _bimocq.reinit_if_distorted(grid, maps, jnp.stack([eta, ratio]), settings.reinit_threshold)
+        inc = jnp.stack([eta - eta_s, ratio - ratio_s.astype(dtype)]).astype(state_dtype)
+        maps = _bimocq.accumulate(grid, maps, inc)
+        maps = _bimocq.reinit_if_distorted(grid, maps, jnp.stack([new.eta, new.gamma / new.eta]),
+                                           settings.reinit_threshold)
         extra = (maps.last_distortion, maps.n_reinit)
     else:
-        extra = (jnp.zeros((), dtype), jnp.zeros((), jnp.int32))
-    return new, maps, StepInfo(info.iterations, info.residual, *extra, jnp.log(change)), solve[0]
+        extra = (jnp.zeros((), state_dtype), jnp.zeros((), jnp.int32))
+    info = StepInfo(info.iterations, info.residual.astype(state_dtype), *extra, jnp.log(change).astype(state_dtype))
+    return new, maps, info, solve[0]
 
 
 def step(grid: SphereGrid, params: FlowParams, carry: Carry, dt, air=Still(), settings: Settings = Settings(),
@@ -299,7 +325,8 @@ def step(grid: SphereGrid, params: FlowParams, carry: Carry, dt, air=Still(), se
     leaves the state unchanged and records the reason (see :data:`REASONS`) and the step.
     ``solve = (rtol, max_iter, conserve)`` overrides the settings' (they may be traced)."""
     if solve is None:
-        solve = (settings.rtol(carry.state.eta.dtype), int(settings.cg_max_iter), bool(settings.conserve))
+        solve = (settings.rtol(carry.state.eta.dtype), int(settings.cg_max_iter),
+                 bool(settings.conserve))
     new, maps, info, rtol = _advance(grid, params, carry, dt, air, settings, solve)
     finite = jnp.all(jnp.array([jnp.all(jnp.isfinite(a)) for a in new]))
     solved = info.cg_residual <= rtol
@@ -384,7 +411,12 @@ def simulate(grid: SphereGrid, params: FlowParams, state: State, dt, n_steps: in
     if carry is None:
         carry = start(grid, state, settings)
     dtype = carry.state.eta.dtype
-    solve = (jnp.asarray(settings.rtol(dtype), dtype), jnp.asarray(int(settings.cg_max_iter), jnp.int32),
+    if jnp.dtype(settings.working_dtype(dtype)) == jnp.float32 and grid.n_theta > 256:
+        warnings.warn(f"a float32 solve on a {grid.n_theta}x{grid.n_phi} grid: float32 rounding in the pole rows "
+                      "grows with the grid and a 512 x 1024 run blew up in 3 steps; enable JAX's x64 mode for a "
+                      "float64 solve (Settings.solve_dtype)", RuntimeWarning, stacklevel=2)
+    wd = settings.working_dtype(dtype)
+    solve = (jnp.asarray(settings.rtol(dtype), wd), jnp.asarray(int(settings.cg_max_iter), jnp.int32),
              jnp.asarray(bool(settings.conserve)))
     static = dataclasses.replace(settings, cg_rtol=None, cg_max_iter=1, conserve=True)  # traced above
     carry, frames, times, info = _run(carry, params, jnp.asarray(dt, carry.state.eta.dtype),
@@ -404,7 +436,8 @@ def simulate(grid: SphereGrid, params: FlowParams, state: State, dt, n_steps: in
             last = carry.last
             raise FlowError(f"{REASONS[reason]} at {where}: cg residual {float(last.cg_residual):.3g} after "
                             f"{int(last.cg_iterations)} iterations (rtol "
-                            f"{settings.rtol(carry.state.eta.dtype):.3g}); the state was frozen before it")
+                            f"{settings.rtol(carry.state.eta.dtype):.3g}); the state was "
+                            "frozen before it")
     return Result(carry, frames, times, info, stopped)
 
 
