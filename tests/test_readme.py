@@ -109,3 +109,15 @@ def test_cloth_example_runs():
     for v, bands in ((f, 3), (f90, 3), (ft, 1)):  # the twill's albedo is one grey band
         assert v.shape == (57, bands) and np.all(np.isfinite(v)) and np.all(v >= 0)
     assert not np.allclose(f, f90)  # the weave is anisotropic
+
+
+def test_soap_film_flow_example_runs():
+    """The bubble example, then the flow example that continues it (same namespace)."""
+    ns: dict = {}
+    exec(compile(_block("soapfilm.render("), "README bubble example", "exec"), ns)
+    exec(compile(_block("soapfilm.simulate("), "README flow example", "exec"), ns)
+    frames = np.asarray(ns["sim"].frames)
+    assert frames.shape == (5, 32, 64) and ns["sim"].stopped is None
+    top, bottom = frames[-1][0].mean(), frames[-1][-1].mean()
+    assert top < 0.7 < 1.3 < bottom  # bands: thin on top, thick below (Huang Eq. 3.36)
+    assert callable(ns["bands"])
