@@ -437,3 +437,16 @@ def test_blowing_then_stopping_stays_stable_at_the_poles():
         worst = max(worst, div[[0, -1]].max())
     # measured: max |div u| in the pole rows 0.19 (9.9 with the distortion measured on the sphere)
     assert worst < 1.0
+
+
+def test_solve_precision_setting():
+    """float32 state, float64 solve (x64 is on in the tests): see Settings.solve_dtype."""
+    assert flow.Settings().working_dtype(jnp.float32) == jnp.float64
+    assert flow.Settings(solve_dtype="state").working_dtype(jnp.float32) == jnp.float32
+    with pytest.raises(ValueError, match="solve_dtype = 'half'"):
+        flow.Settings(solve_dtype="half")
+    grid = SphereGrid(8, 16)
+    r = flow.simulate(grid, flow.FlowParams(), flow.rest_state(grid, dtype=jnp.float32), 0.1, 3)
+    s = r.carry.state
+    assert all(a.dtype == jnp.float32 for a in s)  # the state keeps its dtype
+    assert float(r.carry.last.cg_residual) <= 1e-6  # the float32 state's tolerance
