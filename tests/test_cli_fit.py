@@ -44,6 +44,7 @@ def test_fit_writes_report_and_recovers_reflectance(lambert_csv, tmp_path, capsy
     assert "reflectance[R]" in text and "converged" in text  # result.summary()
     assert str(out / "maps.png") in text  # the files written
     assert text.strip().splitlines()[-1] == f"status: converged in {d['iterations']} steps (exit 0)"
+    assert d["warnings"] and all(text.count(w) == 1 for w in d["warnings"])  # each warning once, not twice
     assert d["exit"] == {"code": 0, "status": "converged"} and d["fixed_by"] == {}
     assert jax.config.jax_enable_x64  # left as the tests set it
 

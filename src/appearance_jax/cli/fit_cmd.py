@@ -165,8 +165,9 @@ def _fit(args, plan) -> int:
     _annotate(paths["params"], origin, code, status)
     if args.quiet:
         print(f"wrote {', '.join(paths.values())}")
-    for w in _warnings(result):
-        print(f"warning: {w}")
+    if getattr(result, "warnings", None) is None:  # a FitResult's own warnings are in its summary already
+        for w in _warnings(result):
+            print(f"warning: {w}")
     if result.converged:
         print(f"status: converged in {result.iterations} steps (exit {code})", flush=True)
     else:
