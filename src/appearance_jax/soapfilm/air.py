@@ -23,9 +23,7 @@ import numpy as np
 from ..core.vec import Vec3, cross
 from .grid import components, point
 
-__all__ = ["Still", "Rotating", "CurlNoise", "noise", "AIR_KINDS", "make_air", "on_faces"]
-
-AIR_KINDS = ("none", "blow", "curl")
+__all__ = ["Still", "Rotating", "CurlNoise", "noise", "on_faces"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -135,17 +133,6 @@ def noise(p: Vec3, seed: int = 0, frequency: float = 6.0, n_waves: int = 32):
     for initial thickness perturbations (the thesis' Perlin noise, Huang Fig. 3.17)."""
     psi, _ = _potential(_waves(int(seed), int(n_waves), float(frequency)), p)
     return psi * float(np.sqrt(2.0))
-
-
-def make_air(kind: str, **kw):
-    """The air field named ``kind`` (one of :data:`AIR_KINDS`) with keyword parameters."""
-    if kind == "none":
-        return Still()
-    if kind == "blow":
-        return Rotating(**kw)
-    if kind == "curl":
-        return CurlNoise(**kw)
-    raise ValueError(f"air = {kind!r}: must be one of {AIR_KINDS}")
 
 
 def on_faces(grid, air, t, dtype):

@@ -73,7 +73,7 @@ SCENES = {
     "blow": "a rotating ball of air (straw) from 0.25 s on swirls the bands into stripes (Huang Fig. 3.15)",
     "evaporate": "noisy film, curl-noise air, evaporation: the top fades to grey (Huang Fig. 3.17)",
 }
-#: the air of each scene (a kind of :func:`~appearance_jax.soapfilm.air.make_air`)
+#: the air of each scene (a kind of :func:`air_field`)
 AIR_FOR_SCENE = {"gravity": "none", "islands": "none", "blow": "blow", "evaporate": "curl"}
 
 BLOW_AXIS = (0.0, -1.0, 0.0)  # towards the default camera (bubble.render looks from -y)
