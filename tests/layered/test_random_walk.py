@@ -57,6 +57,25 @@ def assert_close(a, b, se, what, z=Z):
     assert np.all(dev < z), f"{what}: max deviation {dev.max():.2f} standard errors\n{a}\n{b}"
 
 
+def lam(reflectance=0.5):
+    """A Lambertian base with an RGB (3,) reflectance: one pytree shape for every test, so the
+    walks with the same sizes below share one compiled program."""
+    r = jnp.broadcast_to(jnp.asarray(reflectance, jnp.float64), (3,))
+    return layered.Bottom(lambert.MODEL, lambert.Params(reflectance=r))
+
+
+# The walks of the tests below share a few compiled programs (compilation is most of their
+# cost): one sizing for the quick checks, one for the statistical comparisons (eta is always
+# given: eta = 1 is the default index-matched stack, and a black base is a Lambertian of
+# reflectance 0, which reflects nothing: the same estimator as bottom=None).
+QUICK = dict(n_samples=64, max_bounces=16)
+STAT = dict(n_samples=2**13, max_bounces=128)
+
+
+def ones(n):
+    return jnp.ones((n,))
+
+
 MEDIUM = dict(c_d=0.5, albedo_d=(0.9, 0.8, 0.7), albedo_p=0.85, w_g=0.7, g1=0.5, g2=-0.3, alpha=0.3, theta=0.3)
 
 
@@ -94,10 +113,9 @@ def test_semi_infinite_isotropic_medium_matches_h_function(w):
 def test_thickness_zero_returns_the_base_exactly():
     wi, wo = pairs()
     m = media(MEDIUM)
-    lam = lambert.Params(reflectance=(0.2, 0.5, 0.9))
-    f, se = layered.walk(m, jnp.array([0.0]), wi, wo, jax.random.key(6), n_samples=64, max_bounces=8,
-                         bottom=layered.Bottom(lambert.MODEL, lam))
-    np.testing.assert_allclose(f, lambert.eval(lam, wi, wo), rtol=1e-12)
+    bottom = lam((0.2, 0.5, 0.9))
+    f, se = layered.walk(m, jnp.array([0.0]), wi, wo, jax.random.key(6), eta=ones(1), bottom=bottom, **QUICK)
+    np.testing.assert_allclose(f, lambert.eval(bottom.params, wi, wo), rtol=1e-12)
     assert np.all(np.asarray(se) <= 1e-12 * np.asarray(f))  # every path gives the same value
     # other bases (rough_plastic): tests/bsdf/test_cosmetics.py::test_thickness_zero_is_the_base
 
@@ -106,9 +124,12 @@ def test_smooth_dielectric_over_lambert_matches_closed_form():
     """t = 0, eta = 1.5 over Lambert rho: f = (1 - F_i)(1 - F_o) rho / (pi eta^2 (1 - rho r_i))."""
     eta, rho = 1.5, 0.7
     wi, wo = pairs()
-    f, se = layered.walk(media(MEDIUM), jnp.array([0.0]), wi, wo, jax.random.key(7), n_samples=2**14,
-                         max_bounces=96, eta=jnp.array([eta]),
-                         bottom=layered.Bottom(lambert.MODEL, lambert.Params(reflectance=rho)))
+    # 2 x 2^13 paths (two keys, the STAT program) == the 2^14 of one estimate: the mean of the two
+    # independent estimates, standard error sqrt(se1^2 + se2^2) / 2
+    est = [layered.walk(media(MEDIUM), jnp.array([0.0]), wi, wo, k, eta=jnp.array([eta]), bottom=lam(rho), **STAT)
+           for k in jax.random.split(jax.random.key(7))]
+    f = (est[0][0] + est[1][0]) / 2
+    se = jnp.sqrt(est[0][1] ** 2 + est[1][1] ** 2) / 2
     mu, w = gauss_legendre(2000, 0.0, 1.0)
     # internal diffuse reflectance of the interface (light from inside, cosine-weighted)
     r_i = float(np.sum(2.0 * mu * w * np.asarray(fresnel_dielectric(-jnp.asarray(mu), eta)[0])))
@@ -162,9 +183,8 @@ def test_next_event_estimates_integrate_to_the_escape_albedo():
 
 def test_reciprocity_within_noise():
     m = media(MEDIUM)  # tilted platelets: anisotropic, still reciprocal
-    bottom = layered.Bottom(lambert.MODEL, lambert.Params(reflectance=(0.3, 0.5, 0.1)))
     wi, wo = pairs()
-    kw = dict(n_samples=2**13, max_bounces=128, bottom=bottom)
+    kw = dict(eta=ones(1), bottom=lam((0.3, 0.5, 0.1)), **STAT)
     f1, s1 = layered.walk(m, jnp.array([1.5]), wi, wo, jax.random.key(11), **kw)
     f2, s2 = layered.walk(m, jnp.array([1.5]), wo, wi, jax.random.key(12), **kw)
     assert_close(f1, f2, np.sqrt(s1**2 + s2**2), "reciprocity", z=3.0)
@@ -173,9 +193,8 @@ def test_reciprocity_within_noise():
 @pytest.mark.parametrize("eta", [pytest.param(1.0, marks=pytest.mark.slow), 1.3])  # 1.3: dielectric interfaces too
 def test_two_stacked_layers_equal_one(eta):
     m = dict(MEDIUM, theta=0.2)
-    bottom = layered.Bottom(lambert.MODEL, lambert.Params(reflectance=0.5))
     wi, wo = pairs()
-    kw = dict(n_samples=2**13, max_bounces=128, bottom=bottom)
+    kw = dict(bottom=lam(0.5), **STAT)
     f1, s1 = layered.walk(media(m), jnp.array([1.2]), wi, wo, jax.random.key(13), eta=jnp.array([eta]), **kw)
     f2, s2 = layered.walk(media(m, m), jnp.array([0.7, 0.5]), wi, wo, jax.random.key(14),
                           eta=jnp.array([eta, eta]), **kw)
@@ -189,14 +208,17 @@ def test_hg_media_match_adding_doubling(lobes):
     wi, wo = pairs()
     top = dict(c_d=1.0, albedo_d=(0.95, 0.8, 0.5), **lobes)
     bot = dict(c_d=1.0, albedo_d=0.9, w_g=1.0, g1=-0.4)
-    kw = dict(n_samples=2**13, max_bounces=128)
-    f, se = layered.walk(media(top), jnp.array([2.0]), wi, wo, jax.random.key(15),
-                         bottom=layered.Bottom(lambert.MODEL, lambert.Params(reflectance=0.4)), **kw)
+    kw = STAT
+    f, se = layered.walk(media(top), jnp.array([2.0]), wi, wo, jax.random.key(15), eta=ones(1), bottom=lam(0.4),
+                         **kw)
     hg = adding_doubling.HGLayer(albedo=jnp.array(top["albedo_d"]), thickness=2.0, g1=lobes["g1"],
                                  g2=lobes.get("g2", 0.0), w_g=lobes["w_g"])
     ref = adding_doubling.brdf(hg, 0.4, wi, wo)
     assert_close(f, ref, se, f"adding-doubling, one layer {lobes}")
-    f, se = layered.walk(media(top, bot), jnp.array([0.5, 3.0]), wi, wo, jax.random.key(16), **kw)
+    # over black: a Lambertian base of reflectance 0 (the two-layer program of test_two_stacked_layers_equal_one;
+    # bottom=None itself: test_first_order_equals_single_scattering, the H-function test)
+    f, se = layered.walk(media(top, bot), jnp.array([0.5, 3.0]), wi, wo, jax.random.key(16), eta=ones(2),
+                         bottom=lam(0.0), **kw)
     ref = adding_doubling.brdf([hg._replace(thickness=0.5), adding_doubling.HGLayer(0.9, 3.0, g1=-0.4)], 0.0,
                                wi, wo)
     assert_close(f, ref, se, f"adding-doubling, two layers {lobes}")
@@ -205,16 +227,17 @@ def test_hg_media_match_adding_doubling(lobes):
 def test_grazing_and_below_horizon_give_zero_not_nan():
     wi = Vec3(jnp.array([1.0, 0.6, 0.6]), jnp.zeros(3), jnp.array([0.0, 0.8, -0.8]))
     wo = Vec3(jnp.array([0.6, 1.0, 0.6]), jnp.zeros(3), jnp.array([0.8, 0.0, 0.8]))
-    f, se = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(0), n_samples=16, max_bounces=16,
-                         bottom=layered.Bottom(lambert.MODEL, lambert.Params()))
+    f, se = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(0), eta=ones(1), bottom=lam(),
+                         **QUICK)
     assert np.all(np.asarray(f) == 0.0) and np.all(np.isfinite(np.asarray(se)))
 
 
 def test_same_key_same_numbers():
     wi, wo = pairs()
-    a = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(1), n_samples=32, max_bounces=32)
-    b = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(1), n_samples=32, max_bounces=32)
-    c = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(2), n_samples=32, max_bounces=32)
+    kw = dict(eta=ones(1), bottom=lam(), **QUICK)
+    a = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(1), **kw)
+    b = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(1), **kw)
+    c = layered.walk(media(MEDIUM), jnp.array([1.0]), wi, wo, jax.random.key(2), **kw)
     assert np.array_equal(a[0], b[0]) and not np.array_equal(a[0], c[0])
 
 
