@@ -64,34 +64,50 @@ M18 = [
 ]
 
 
+# Compilation dominates: fl.trace compiles one program per (number of offsets, max_events,
+# mode, flags, number of bands, interface kinds). The split-mode traces of smooth one-band
+# fibers below therefore all use N_SPLIT offsets and E_SPLIT events (a test that needs fewer
+# offsets repeats its own to fill the array and reads its first ones; events beyond a lobe do
+# not change the records of that lobe).
+N_SPLIT, E_SPLIT = 13, 5
+
+
+def _fill(h):
+    """h repeated to N_SPLIT offsets (the first len(h) are h)."""
+    return jnp.asarray(np.resize(np.asarray(h, float), N_SPLIT))
+
+
 @pytest.mark.parametrize("h, theta_deg, f, phis, amps", M18)
 def test_smooth_circle_matches_spec_m18_table(h, theta_deg, f, phis, amps):
     wi = fiber_direction(np.radians(theta_deg), 0.0)
-    rec = fl.trace(fl.fiber(1.55), wi, jnp.array([h]), max_events=4)
-    w = np.asarray(rec.weight[:, 0, 0])
+    rec = fl.trace(fl.fiber(1.55), wi, _fill([h]), max_events=E_SPLIT)
+    w = np.asarray(rec.weight[:4, 0, 0])
     th, ph = fiber_angles(rec.direction)
     # printed to 5 decimals / 0.01 deg
     np.testing.assert_allclose(w, amps, atol=6e-6)
-    d = wrap(np.asarray(ph[:, 0]) - np.radians(np.array(phis, float)))
+    d = wrap(np.asarray(ph[:4, 0]) - np.radians(np.array(phis, float)))
     assert np.max(np.abs(np.degrees(d))) < 0.006
-    np.testing.assert_allclose(np.asarray(th[:, 0]), -np.radians(theta_deg), atol=1e-12)  # specular cone
-    np.testing.assert_allclose(np.asarray(rec.lobe[:, 0]), [0, 1, 2, 3])
+    np.testing.assert_allclose(np.asarray(th[:4, 0]), -np.radians(theta_deg), atol=1e-12)  # specular cone
+    np.testing.assert_allclose(np.asarray(rec.lobe[:4, 0]), [0, 1, 2, 3])
 
 
 def test_smooth_circle_equals_closed_form_with_absorption_per_band():
     sigma = jnp.array([0.1, 0.8, 2.5])
     theta_i = 0.7
-    h = np.linspace(-0.97, 0.97, 11)
-    rec = fl.trace(fl.fiber(1.55, sigma), fiber_direction(theta_i, 0.3), jnp.asarray(h), max_events=4)
+    # 64 offsets and 12 events: the shape of test_energy_bookkeeping_is_exact_in_split_mode
+    # (one compiled program); the closed form covers the first 4 lobes
+    h = np.linspace(-0.97, 0.97, 64)
+    rec = fl.trace(fl.fiber(1.55, sigma), fiber_direction(theta_i, 0.3), jnp.asarray(h), max_events=12)
     for b, s in enumerate(np.asarray(sigma)):
         A, Phi = closed_form_lobes(h, theta_i, 1.55, s)
-        np.testing.assert_allclose(np.asarray(rec.weight[:, :, b]), A, rtol=1e-10, atol=1e-14)
+        np.testing.assert_allclose(np.asarray(rec.weight[:4, :, b]), A, rtol=1e-10, atol=1e-14)
     _, ph = fiber_angles(rec.direction)
-    np.testing.assert_allclose(wrap(np.asarray(ph) - 0.3 - Phi), 0.0, atol=1e-9)
+    np.testing.assert_allclose(wrap(np.asarray(ph[:4]) - 0.3 - Phi), 0.0, atol=1e-9)
 
 
 def test_energy_bookkeeping_is_exact_in_split_mode():
-    sec = fl.fiber(1.6, jnp.array([0.0, 0.4]), eccentricity=0.7, rotation=0.4)
+    # (three bands: the shape of the absorption test above, one compiled program)
+    sec = fl.fiber(1.6, jnp.array([0.0, 0.4, 1.3]), eccentricity=0.7, rotation=0.4)
     h = jax.random.uniform(KEY, (64,), minval=-1, maxval=1)
     rec = fl.trace(sec, fiber_direction(-0.6, 1.1), h, max_events=12)
     total = rec.weight.sum(0) + rec.absorbed + rec.lost + rec.residual
@@ -102,11 +118,11 @@ def test_energy_bookkeeping_is_exact_in_split_mode():
 
 
 def test_rotating_ellipse_with_incidence_changes_nothing():
-    h = jnp.linspace(-0.95, 0.95, 9)
-    base = fl.trace(fl.fiber(1.55, 0.3, eccentricity=0.8), fiber_direction(0.4, 0.2), h, max_events=5)
+    h = jnp.linspace(-0.95, 0.95, N_SPLIT)
+    base = fl.trace(fl.fiber(1.55, 0.3, eccentricity=0.8), fiber_direction(0.4, 0.2), h, max_events=E_SPLIT)
     for psi in (0.3, 1.2, -2.0):
         rot = fl.trace(fl.fiber(1.55, 0.3, eccentricity=0.8, rotation=psi), fiber_direction(0.4, 0.2 + psi), h,
-                       max_events=5)
+                       max_events=E_SPLIT)
         np.testing.assert_allclose(np.asarray(rot.weight), np.asarray(base.weight), atol=1e-12)
         _, p0 = fiber_angles(base.direction)
         _, p1 = fiber_angles(rot.direction)
@@ -115,10 +131,10 @@ def test_rotating_ellipse_with_incidence_changes_nothing():
 
 
 def test_ellipse_with_zero_eccentricity_is_the_circle():
-    h = jnp.linspace(-0.99, 0.99, 13)
+    h = jnp.linspace(-0.99, 0.99, N_SPLIT)
     wi = fiber_direction(0.5, 0.9)
-    a = fl.trace(fl.fiber(1.55, 0.5), wi, h, max_events=5)
-    b = fl.trace(fl.fiber(1.55, 0.5, eccentricity=0.0, rotation=1.234), wi, h, max_events=5)
+    a = fl.trace(fl.fiber(1.55, 0.5), wi, h, max_events=E_SPLIT)
+    b = fl.trace(fl.fiber(1.55, 0.5, eccentricity=0.0, rotation=1.234), wi, h, max_events=E_SPLIT)
     np.testing.assert_allclose(np.asarray(b.weight), np.asarray(a.weight), atol=1e-13)
     np.testing.assert_allclose(np.asarray(b.direction.to_array()), np.asarray(a.direction.to_array()), atol=1e-12)
 
@@ -133,9 +149,9 @@ def test_ellipse_projected_width_and_chord_lengths():
         np.testing.assert_allclose(float(D), np.sqrt(1 - e ** 2 * np.sin(phi) ** 2), rtol=1e-12)
     # TT with sigma = 1: A_TT / ((1 - F1)(1 - F2)) = exp(-chord_3D); R and TT without absorption
     wi = fiber_direction(0.3, 0.7)
-    h = jnp.array([0.2])
-    with_abs = fl.trace(sec, wi, h, max_events=2)
-    no_abs = fl.trace(sec.with_media(sigma_a=jnp.asarray(0.0)), wi, h, max_events=2)
+    h = _fill([0.2])
+    with_abs = fl.trace(sec, wi, h, max_events=E_SPLIT)
+    no_abs = fl.trace(sec.with_media(sigma_a=jnp.asarray(0.0)), wi, h, max_events=E_SPLIT)
     ratio = float(with_abs.weight[1, 0, 0] / no_abs.weight[1, 0, 0])
     # explicit chord: entry point from the launch geometry, exit point = second emission's
     # origin; here recomputed in numpy from the ellipse (semi-axes b along y, 1 along z)
@@ -197,8 +213,9 @@ def test_tilt_law_of_a_smooth_tilted_cylinder(alpha_deg):
     a = np.radians(alpha_deg)
     theta_i = 0.35
     h = np.array([0.0, 0.3, 0.6, 0.9])
-    rec = fl.trace(fl.fiber(1.55, tilt=a), fiber_direction(theta_i, 0.0), jnp.asarray(h), max_events=1)
+    rec = fl.trace(fl.fiber(1.55, tilt=a), fiber_direction(theta_i, 0.0), _fill(h), max_events=E_SPLIT)
     th, _ = fiber_angles(rec.direction)
+    th = th[:, :h.size]
     ref = np.arcsin(2 * np.sin(a) * (np.cos(theta_i) * np.cos(a) * np.sqrt(1 - h ** 2)
                                      + np.sin(theta_i) * np.sin(a)) - np.sin(theta_i))
     np.testing.assert_allclose(np.asarray(th[0]), ref, atol=1e-12)
@@ -213,8 +230,8 @@ def test_grazing_and_edge_offsets_return_finite_values():
     for leaf in jax.tree_util.tree_leaves(rec):
         assert np.all(np.isfinite(np.asarray(leaf)))
     # h = +-1 (grazing entry) on smooth and rough fibers
-    for s in (fl.fiber(1.55, 0.5), sec):
-        rec = fl.trace(s, fiber_direction(0.3, 0.0), jnp.array([-1.0, 1.0]), KEY, max_events=6)
+    for s in (fl.fiber(1.55, 0.5), sec):               # (the smooth one: the shared N_SPLIT program)
+        rec = fl.trace(s, fiber_direction(0.3, 0.0), _fill([-1.0, 1.0]), KEY, max_events=E_SPLIT)
         for leaf in jax.tree_util.tree_leaves(rec):
             assert np.all(np.isfinite(np.asarray(leaf)))
         total = rec.weight.sum(0) + rec.absorbed + rec.lost + rec.residual
@@ -224,15 +241,45 @@ def test_grazing_and_edge_offsets_return_finite_values():
 # ----------------------------------------------------------------------------- wave data
 
 
-def test_optical_path_and_amplitudes_equal_closed_forms():
+# The wave-data tests share traces of a water cylinder at normal incidence (module fixture):
+# the offsets of both tests in one array, max_events = 5 (later events do not change the
+# records of earlier lobes), so that three programs are compiled instead of six.
+H_PATH = np.linspace(-0.99, 0.99, 15)
+H_FOCI = np.array([-0.95, -0.6, -0.2, 0.1, 0.5, 0.8, 0.9, 0.97])
+H_WAVE = np.unique(np.concatenate([H_PATH, H_FOCI]))
+assert H_WAVE.size == H_PATH.size + H_FOCI.size
+
+
+def _at(records, h):
+    """The records of the offsets h (a subset of H_WAVE), rays along axis 1."""
+    j = np.searchsorted(H_WAVE, h)
+    assert np.array_equal(H_WAVE[j], h)
+    ev = lambda a: jax.tree_util.tree_map(lambda x: x[:, j], a)      # (events, N, ...) fields
+    ray = lambda a: jax.tree_util.tree_map(lambda x: x[j], a)           # (N, ...) fields
+    return records._replace(**{k: ev(getattr(records, k)) for k in
+                               ("direction", "weight", "lobe", "opl", "foci", "field")},
+                            **{k: ray(getattr(records, k)) for k in
+                               ("h", "absorbed", "lost", "residual", "first_shape", "truncated")})
+
+
+@pytest.fixture(scope="module")
+def water_cylinder():
+    wi = fiber_direction(0.0, 0.0)
+    sec, h = fl.cylinder(1.331), jnp.asarray(H_WAVE)
+    rec = fl.trace(sec, wi, h, max_events=5, wave=True, polarized=True)
+    # (wave=True as above: the same static configuration, the same compiled program)
+    par = fl.trace(sec, wi, h, max_events=5, wave=True, polarized=True,
+                   field=Vec3(0.0, 0.0, 1.0 + 0j))  # in the section plane (TE)
+    unpol = fl.trace(sec, wi, h, max_events=5, wave=True)
+    return rec, par, unpol
+
+
+def test_optical_path_and_amplitudes_equal_closed_forms(water_cylinder):
     """Spec seed-002 §1.2.5: L = -2 cos i + 2 p n cos r; A_perp = rho (p = 0),
     (1 - rho^2)(-rho)^(p-1); |A_par| likewise with rho_par."""
     n = 1.331
-    h = np.linspace(-0.99, 0.99, 15)
-    wi = fiber_direction(0.0, 0.0)
-    rec = fl.trace(fl.cylinder(n), wi, jnp.asarray(h), max_events=5, wave=True, polarized=True)
-    par = fl.trace(fl.cylinder(n), wi, jnp.asarray(h), max_events=5, polarized=True,
-                   field=Vec3(0.0, 0.0, 1.0 + 0j))  # in the section plane (TE)
+    h = H_PATH
+    rec, par, unpol = (_at(r, h) for r in water_cylinder)
     i = np.arcsin(np.abs(h))
     r = np.arcsin(np.sin(i) / n)
     rho_s = (np.cos(i) - n * np.cos(r)) / (np.cos(i) + n * np.cos(r))
@@ -246,8 +293,7 @@ def test_optical_path_and_amplitudes_equal_closed_forms():
         np.testing.assert_allclose(np.sqrt(np.sum(E_par ** 2, 0)), np.abs(a_p), atol=1e-12)
         np.testing.assert_allclose(np.abs(np.asarray(par.field.x[p])), 0.0, atol=1e-12)  # stays TE
     # the unpolarised R weight is the mean of the two polarisations
-    unpol = fl.trace(fl.cylinder(n), wi, jnp.asarray(h), max_events=1).weight[0, :, 0]
-    np.testing.assert_allclose(0.5 * (rho_s ** 2 + rho_p ** 2), np.asarray(unpol), atol=1e-12)
+    np.testing.assert_allclose(0.5 * (rho_s ** 2 + rho_p ** 2), np.asarray(unpol.weight[0, :, 0]), atol=1e-12)
 
 
 def _segments_cross(p0, d0, l0, p1, d1, l1):
@@ -284,11 +330,11 @@ def _polyline(h, n, p):
 
 
 @pytest.mark.parametrize("p", [1, 2, 3])
-def test_meridional_foci_equal_brute_force_neighbour_crossings(p):
+def test_meridional_foci_equal_brute_force_neighbour_crossings(p, water_cylinder):
     n, dh = 1.331, 1e-6
-    hs = np.array([-0.95, -0.6, -0.2, 0.1, 0.5, 0.8, 0.9, 0.97])
+    hs = H_FOCI
     # the count is symmetric in h, so the side convention of the brute force does not matter
-    rec = fl.trace(fl.cylinder(n), fiber_direction(0.0, 0.0), jnp.asarray(hs), max_events=p + 1, wave=True)
+    rec = _at(water_cylinder[2], hs)                   # wave=True, unpolarised, 5 events
     for j, h in enumerate(hs):
         a, da = _polyline(h, n, p)
         b, db = _polyline(h + dh, n, p)
