@@ -349,20 +349,22 @@ def _gradients(model, params, case, scale=1):
     so the finite differences may step across a closed bound such as reflectance = 1.
     """
     wi, wo = testing.reciprocity_pairs(model, params, key=5, n=32 * scale)
+    f0 = testing.call_chunked(model.eval, params, wi, wo)  # the other checks' compiled eval and pdf
     wi, wo = (w.map(jnp.asarray) for w in (wi, wo))
-    f0 = np.asarray(model.eval(params, wi, wo))
     c = jax.random.uniform(jax.random.key(6), f0.shape, jnp.float64) / max(float(np.abs(f0).max()), 1e-12)
     has_pdf = model.pdf is not None
     if has_pdf:
-        p0 = np.asarray(model.pdf(params, wi, wo))
+        p0 = testing.call_chunked(model.pdf, params, wi, wo)
         d = jax.random.uniform(jax.random.key(7), p0.shape, jnp.float64) / max(float(np.abs(p0).max()), 1e-12)
 
-    @jax.jit
-    def fn(p):
+    def functional(p):
         out = jnp.sum(c * model.eval(p, wi, wo))
         return out + jnp.sum(d * model.pdf(p, wi, wo)) if has_pdf else out
 
-    testing.assert_gradients(fn, params, name=model.name)
+    # one compiled program for the derivatives (jax.grad of a jitted function compiles its
+    # forward and backward passes separately), one for the finite differences
+    fn, grad_fn = jax.jit(functional), jax.jit(jax.grad(functional))
+    testing.assert_gradients(fn, params, name=model.name, grad_fn=grad_fn)
 
 
 CHECKS = {"reciprocity": _reciprocity, "furnace": _furnace, "sampling": _sampling, "chi2": _chi2,

@@ -21,7 +21,7 @@ CHEAP = {
 
 # models whose eval + gradient take more than ~10 s to compile here: their float32 run is in the
 # slow suite (the default run checks them in float64, the dtype of the other tests)
-HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth_weave", "rough_plastic", "iridescent", "snake"}
+HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake"}
 # sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
 SLOW = {"rough_plastic+lambert"}
 

@@ -21,9 +21,11 @@ significance (see :mod:`.properties`, :mod:`.chi2`, :mod:`.gradients`).
 
 from .chi2 import Chi2Result, assert_chi2, chi2_pvalue, chi2_test, pool_cells  # noqa: F401
 from .directions import (  # noqa: F401
+    call_chunked,
     incident_domain,
     projection_cosine,
     random_directions,
+    sample_chunked,
     scattering_domain,
 )
 from .gradients import GradientResult, assert_gradients, check_gradients  # noqa: F401

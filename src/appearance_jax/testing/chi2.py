@@ -41,6 +41,7 @@ from .directions import (
     np_dot,
     np_vec,
     random_directions,
+    sample_chunked,
     scattering_domain,
 )
 from .results import CheckResult, fmt, sidak, z_threshold
@@ -170,7 +171,7 @@ def chi2_test(model, params, *, key=0, wi: Vec3 | None = None, n_wi: int = 4, mi
 
     # --- histogram of the sampled directions
     wb = Vec3(*(jnp.asarray(np.broadcast_to(np.asarray(c)[:, None], (m, n_samples))) for c in wi))
-    wo, _, pdf_s = model.sample(params, wb, ks)
+    wo, _, pdf_s = sample_chunked(model, params, wb, ks)
     ok = np.asarray(pdf_s) > 0
     wo = np_vec(wo, ok.shape)
     mu = np_dot(wo, pole)

@@ -96,8 +96,10 @@ def domain_solid_angle(domain: str) -> float:
 # host-side helpers: the harness does its bookkeeping in numpy and calls the (jitted)
 # model functions on a few fixed shapes, so a check compiles little.
 
-#: model functions are called on flat direction arrays of at most this many elements
-CHUNK = 2**15
+#: model functions are called on flat direction arrays of exactly this many elements (padded), so
+#: that every check of a case (reciprocity, furnace, sampling, chi-square, gradients) runs the same
+#: compiled eval, pdf and sample programs: the harness is compile-bound, not run-bound
+CHUNK = 2**13
 
 
 def np_vec(w: Vec3, shape=None) -> Vec3:
@@ -121,17 +123,15 @@ def np_dot(a: Vec3, b: Vec3) -> np.ndarray:
 
 
 def _pad_len(n: int, chunk: int) -> int:
-    if n >= chunk:
-        return -(-n // chunk) * chunk
-    return max(256, 1 << max(n - 1, 0).bit_length())
+    return max(-(-n // chunk), 1) * chunk
 
 
 def call_chunked(fn, params, wi: Vec3, wo: Vec3, chunk: int = CHUNK) -> np.ndarray:
     """``fn(params, wi, wo)`` (an eval or pdf) on broadcast directions, in fixed-size chunks.
 
-    Directions are flattened and padded (with copies of the first pair) to a power of two
-    below ``chunk`` or to a multiple of ``chunk``, so a jitted ``fn`` compiles for few
-    shapes whatever the caller's sizes. Returns a numpy array of shape
+    Directions are flattened and padded (with copies of the first pair) to a multiple of
+    ``chunk`` and passed ``chunk`` at a time, so a jitted ``fn`` compiles for one shape
+    whatever the caller's sizes. Returns a numpy array of shape
     ``broadcast(wi, wo).shape + fn's trailing axes``.
     """
     shape = np.broadcast_shapes(*(np.shape(c) for c in (*wi, *wo)))
@@ -139,10 +139,34 @@ def call_chunked(fn, params, wi: Vec3, wo: Vec3, chunk: int = CHUNK) -> np.ndarr
     n = a[0].size
     total = _pad_len(n, chunk)
     a = [np.concatenate([c, np.repeat(c[:1], total - n)]) for c in a]
-    step = min(chunk, total)
     outs = []
-    for i in range(0, total, step):  # a few fixed-size batches, not a loop over samples
-        sl = [jnp.asarray(c[i:i + step]) for c in a]
+    for i in range(0, total, chunk):  # a few fixed-size batches, not a loop over samples
+        sl = [jnp.asarray(c[i:i + chunk]) for c in a]
         outs.append(np.asarray(fn(params, Vec3(*sl[:3]), Vec3(*sl[3:]))))
     out = np.concatenate(outs, axis=0)[:n]
     return out.reshape(shape + out.shape[1:])
+
+
+def sample_chunked(model, params, wi: Vec3, key, chunk: int = CHUNK):
+    """``model.sample(params, wi, key)`` on directions of any shape, ``chunk`` at a time.
+
+    Like :func:`call_chunked`: ``wi`` is flattened and padded to a multiple of ``chunk``; chunk
+    ``j`` draws with ``jax.random.fold_in(key, j)``. Returns numpy ``(wo, weight, pdf)`` of
+    shapes ``wi.shape`` (components), ``wi.shape + (n_bands,)`` and ``wi.shape``.
+    """
+    shape = np.broadcast_shapes(*(np.shape(c) for c in wi))
+    a = [np.broadcast_to(np.asarray(c), shape).ravel() for c in wi]
+    n = a[0].size
+    total = _pad_len(n, chunk)
+    a = [np.concatenate([c, np.repeat(c[:1], total - n)]) for c in a]
+    key = as_key(key)
+    wos, weights, pdfs = [], [], []
+    for j, i in enumerate(range(0, total, chunk)):
+        wo, weight, pdf = model.sample(params, Vec3(*(jnp.asarray(c[i:i + chunk]) for c in a)),
+                                       jax.random.fold_in(key, j))
+        wos.append([np.asarray(c) for c in wo])
+        weights.append(np.asarray(weight))
+        pdfs.append(np.asarray(pdf))
+    wo = Vec3(*(np.concatenate([w[k] for w in wos])[:n].reshape(shape) for k in range(3)))
+    weight = np.concatenate(weights)[:n]
+    return wo, weight.reshape(shape + weight.shape[1:]), np.concatenate(pdfs)[:n].reshape(shape)

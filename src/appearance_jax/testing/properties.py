@@ -40,6 +40,7 @@ from .directions import (
     np_vec,
     projection_cosine,
     random_directions,
+    sample_chunked,
     scattering_domain,
 )
 from .results import CheckResult, default_atol, default_rtol, fmt, z_threshold
@@ -95,7 +96,7 @@ def reciprocity_pairs(model, params, key=0, n: int = 512) -> tuple[Vec3, Vec3]:
     wi = random_directions(k1, n, dom)
     wo = np_vec(random_directions(k2, n, dom))
     if getattr(model, "sample", None) is not None:
-        ws, _, pdf = model.sample(params, wi, k3)
+        ws, _, pdf = sample_chunked(model, params, wi, k3)
         use = (np.arange(n) % 2 == 1) & (np.asarray(pdf) > 0)
         wo = Vec3(*(np.where(use, np.asarray(a), b) for a, b in zip(ws, wo)))
     return np_vec(wi), wo
@@ -158,8 +159,7 @@ def albedo_mc(model, params, wi: Vec3, *, key=0, n_samples: int = 2**14, cosine=
     :func:`check_sampling`, since the model's weights already include it.
     """
     del cosine  # the model's weights carry the cosine
-    _, weight, _ = model.sample(params, _repeat(np_vec(wi), n_samples), as_key(key))
-    weight = np.asarray(weight)
+    _, weight, _ = sample_chunked(model, params, _repeat(np_vec(wi), n_samples), key)
     return weight.mean(axis=1), weight.std(axis=1, ddof=1) / np.sqrt(n_samples)
 
 
@@ -375,8 +375,7 @@ def check_sampling(model, params, *, key=0, wi: Vec3 | None = None, n_wi: int = 
     wi = np_vec(wi)
     m = wi.shape[0]
     name = getattr(model, "name", "model")
-    wo, weight, pdf_s = model.sample(params, _repeat(wi, n_samples), ks)
-    weight, pdf_s = np.asarray(weight), np.asarray(pdf_s)
+    wo, weight, pdf_s = sample_chunked(model, params, _repeat(wi, n_samples), ks)
     wo = np_vec(wo, pdf_s.shape)
     ok = pdf_s > 0
     problems = []
