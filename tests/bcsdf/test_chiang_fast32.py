@@ -125,9 +125,15 @@ def test_stepped_eval_matches_lobes(n):
         ref = np.asarray(_reference(p, wi, wo, h))
         assert S.shape == (n, 3)
         assert np.allclose(S, ref, rtol=1e-12, atol=1e-300)
-        # the same pairs one step or less at a time (the unstepped path)
-        part = [np.asarray(chiang.eval(p, Vec3(*(c[k:k + 5000] for c in wi)), Vec3(*(c[k:k + 5000] for c in wo)),
-                                       h=h[k:k + 5000])) for k in range(0, n, 5000)]
+        # the same pairs one step or less at a time (the unstepped path); the last piece is padded to
+        # 5000 pairs with the first ones (pairs are independent), so every piece of both n runs one
+        # compiled program
+        def piece(x, k):
+            x = x[k:k + 5000]
+            return jnp.concatenate([x, x[:5000 - x.shape[0]]]) if x.shape[0] < 5000 else x
+
+        part = [np.asarray(chiang.eval(p, Vec3(*(piece(c, k) for c in wi)), Vec3(*(piece(c, k) for c in wo)),
+                                       h=piece(h, k)))[:min(5000, n - k)] for k in range(0, n, 5000)]
         assert np.allclose(np.concatenate(part), S, rtol=1e-13, atol=1e-300)
         # a 2D batch and a scalar h
         k = n - n % 2
@@ -168,20 +174,20 @@ def test_stepped_eval_gradient():
             return jnp.sum(jnp.log1p(chiang.eval.kernel(q, a, b, hh)))
 
         # jitted (op by op the stepped loop's gradient took a minute); equal parts below one step:
-        # one compiled program for all of them
+        # one compiled program for all of them. One gradient with respect to everything (parameters,
+        # directions, h): two compilations (stepped batch, part) instead of four
         m = n // chiang._GROUPS
         assert m * chiang._GROUPS == n and m < chiang._CHUNK
-        grad_p, grad_d = jax.jit(jax.grad(loss)), jax.jit(jax.grad(loss, argnums=(1, 2, 3)))
-        g = grad_p(p, wi, wo, h)
-        parts = [grad_p(p, Vec3(*(c[k:k + m] for c in wi)), Vec3(*(c[k:k + m] for c in wo)), h[k:k + m])
-                 for k in range(0, n, m)]
+        grad_all = jax.jit(jax.grad(loss, argnums=(0, 1, 2, 3)))
+        g, *gd = grad_all(p, wi, wo, h)
+        both = [grad_all(p, Vec3(*(c[k:k + m] for c in wi)), Vec3(*(c[k:k + m] for c in wo)), h[k:k + m])
+                for k in range(0, n, m)]
+        parts = [q[0] for q in both]
         for name in ("eta", "sigma_a", "beta_m", "beta_n", "alpha"):
             ref = sum(np.asarray(getattr(q, name)) for q in parts)
             assert np.allclose(np.asarray(getattr(g, name)), ref, rtol=1e-10), name
         # and with respect to the directions and h (per pair)
-        gd = grad_d(p, wi, wo, h)
-        parts = [grad_d(p, Vec3(*(c[k:k + m] for c in wi)), Vec3(*(c[k:k + m] for c in wo)), h[k:k + m])
-                 for k in range(0, n, m)]
+        parts = [q[1:] for q in both]
         for a, b in zip(jax.tree.leaves(gd), (np.concatenate(x) for x in zip(*(jax.tree.leaves(q) for q in parts)))):
             # 1e-7: a few pairs whose derivative cancels differ at ~1e-9 between the two programs
             assert np.allclose(np.asarray(a), b, rtol=1e-7, atol=1e-300)
