@@ -33,6 +33,15 @@ def setting(p, **kw):
     return dataclasses.replace(p, **kw)
 
 
+def quick(p, **kw):
+    """``p`` with RGB (3,) albedos and base and a small walk (16 paths, 16 steps): the quick checks
+    below share one compiled program (the same values: the model broadcasts them to RGB anyway)."""
+    q = setting(p, **kw)
+    rgb = {n: np.broadcast_to(np.asarray(getattr(q, n), float), (3,)) for n in ("albedo_d", "albedo_p",
+                                                                          "base_reflectance")}
+    return setting(q, n_samples=16, max_bounces=16, **rgb)
+
+
 def test_presets_are_table_a1():
     d2 = cosmetics.PRESETS["dewy2"]
     assert d2.alpha == 0.002 and d2.c_d == 0.99 and d2.w_g == 0.79 and d2.thickness == 16.0
@@ -62,7 +71,7 @@ def test_bad_settings_raise():
 
 def test_returns_estimate_and_stderr_same_key_same_numbers():
     wi, wo = in_plane(30.0, [-30.0, 0.0, 30.0])
-    p = setting(cosmetics.PRESETS["matte1"], n_samples=64, max_bounces=64)
+    p = quick(cosmetics.PRESETS["matte1"])
     f1, se1 = cosmetics.eval(p, wi, wo, key=KEY)
     f2, _ = cosmetics.eval(p, wi, wo, key=KEY)
     assert f1.shape == (3, 3) and se1.shape == (3, 3)
@@ -72,13 +81,13 @@ def test_returns_estimate_and_stderr_same_key_same_numbers():
 def test_grazing_and_below_horizon_are_zero():
     wi = spherical_direction(jnp.array([0.5, math.pi / 2, 2.0]), jnp.zeros(3))
     wo = spherical_direction(jnp.array([math.pi / 2, 0.5, 0.5]), jnp.full(3, 2.0))
-    f, se = cosmetics.eval(setting(cosmetics.Params(), n_samples=16, max_bounces=16), wi, wo, key=KEY)
+    f, se = cosmetics.eval(quick(cosmetics.Params()), wi, wo, key=KEY)
     assert np.all(np.asarray(f) == 0.0) and np.all(np.isfinite(np.asarray(se)))
 
 
 def test_thickness_zero_is_the_base():
     wi, wo = in_plane(40.0, [-20.0, 10.0, 60.0])
-    p = setting(cosmetics.Params(), thickness=0.0, base_reflectance=(0.2, 0.4, 0.6), n_samples=8, max_bounces=4)
+    p = quick(cosmetics.Params(), thickness=0.0, base_reflectance=(0.2, 0.4, 0.6))
     f, _ = cosmetics.eval(p, wi, wo, key=KEY)
     np.testing.assert_allclose(f, np.broadcast_to(np.array([0.2, 0.4, 0.6]) / np.pi, (3, 3)), rtol=1e-12)
     # any BSDF as the base: a rough plastic under a zero-thickness layer is that rough plastic
@@ -177,6 +186,7 @@ def test_albedo_is_below_one_and_rises_with_platelet_albedo():
     wi = spherical_direction(jnp.array([0.2, 1.0]), jnp.zeros(2))
     p = setting(cosmetics.PRESETS["dewy1"], max_bounces=128)
     a, se = cosmetics.albedo(p, wi, key=KEY, n_samples=4096)
-    a2, _ = cosmetics.albedo(setting(p, albedo_p=1.0, albedo_d=1.0), wi, key=KEY, n_samples=4096)
+    white = (1.0, 1.0, 1.0)  # RGB like the preset's albedos: the same compiled program
+    a2, _ = cosmetics.albedo(setting(p, albedo_p=white, albedo_d=white), wi, key=KEY, n_samples=4096)
     assert np.all(np.asarray(a) < 1.0) and np.all(np.asarray(a) > 0.3)
     assert np.all(np.asarray(a2) > np.asarray(a) + 3 * np.asarray(se))
