@@ -195,9 +195,11 @@ def test_rotation_average_is_the_mean_of_rotated_weaves():
     K = 4
     wi, wo = _random_pairs(30, 65)
     pk = p.replace(n_rotations=K)
+    # call_chunked: every call runs at the one chunk shape, so eval(pk) is the program of the albedo
+    # quadrature below and pdf(pk) that of the sampler's pdf check (one compilation each, not two)
     for fn in (cloth.eval, cloth.radiance_response, cloth.pdf):
-        ref = np.mean([np.asarray(fn(p.replace(rotation=360.0 * k / K), wi, wo)) for k in range(K)], axis=0)
-        np.testing.assert_allclose(np.asarray(fn(pk, wi, wo)), ref, rtol=1e-10, atol=1e-14)
+        ref = np.mean([testing.call_chunked(fn, p.replace(rotation=360.0 * k / K), wi, wo) for k in range(K)], axis=0)
+        np.testing.assert_allclose(testing.call_chunked(fn, pk, wi, wo), ref, rtol=1e-10, atol=1e-14)
     # sampling from the mixture: mean weight = albedo (quadrature), within 4 standard errors
     th = 0.6
     wi1 = Vec3(*(jnp.full((1,), c) for c in (np.sin(th), 0.0, np.cos(th))))
@@ -205,7 +207,7 @@ def test_rotation_average_is_the_mean_of_rotated_weaves():
     wi_n = Vec3(*(jnp.broadcast_to(c, (n,)) for c in wi1))
     wo_s, weight, pdf_s = cloth.sample(pk, wi_n, jax.random.PRNGKey(5))
     ok = np.asarray(pdf_s) > 0
-    np.testing.assert_allclose(np.asarray(cloth.pdf(pk, wi_n, wo_s))[ok], np.asarray(pdf_s)[ok], rtol=1e-9)
+    np.testing.assert_allclose(testing.call_chunked(cloth.pdf, pk, wi_n, wo_s)[ok], np.asarray(pdf_s)[ok], rtol=1e-9)
     w = np.asarray(weight)
     albedo = np.asarray(testing.albedo_quadrature(cloth.MODEL, pk, wi1, n_theta=96, n_phi=192))[0]
     se = w.std(axis=0) / np.sqrt(n)
