@@ -47,7 +47,7 @@ def _dense(grid, faces, gamma, dt):
 
 
 def test_system_is_symmetric_positive_definite_ss4():
-    grid = SphereGrid(6, 12)
+    grid = SphereGrid(8, 16)  # the grid of the stencil and CG tests: _dense compiled once
     faces, _, gamma = _random_faces(grid, np.random.default_rng(0))
     A = _dense(grid, faces, gamma, 0.04)
     assert np.max(np.abs(A - A.T)) <= 1e-13 * np.max(np.abs(A))
