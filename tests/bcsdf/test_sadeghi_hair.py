@@ -222,15 +222,17 @@ def test_mapping_reproduces_marschner_lobes():
     mp = M.Params(caustic="none", fresnel="exact")
     a = S.afc_from_marschner(mp)
     th = jnp.linspace(-1.0, 1.0, 21)   # theta_i = theta_o: theta_d = 0, theta_h = th
-    phys = np.asarray(_mlobes(mp, th, th, 0.0))
-    art = np.asarray(_slobes(a.replace(glint_intensity=0.0), th, th, 0.0))
+    # every call below with three (21,) arrays: one compiled program per lobes function
+    full = lambda v: jnp.full(21, v, jnp.float64)  # noqa: E731
+    phys = np.asarray(_mlobes(mp, th, th, full(0.0)))
+    art = np.asarray(_slobes(a.replace(glint_intensity=0.0), th, th, full(0.0)))
     np.testing.assert_allclose(art[0], phys[0], rtol=1e-9)       # R at phi = 0
     np.testing.assert_allclose(art[2], phys[2], rtol=1e-9)       # TRT off-caustic level at phi = 0
-    phys_tt = np.asarray(_mlobes(mp, th, th, np.pi - 1e-9))
-    art_tt = np.asarray(_slobes(a, th, th, np.pi))
+    phys_tt = np.asarray(_mlobes(mp, th, th, full(np.pi - 1e-9)))
+    art_tt = np.asarray(_slobes(a, th, th, full(np.pi)))
     np.testing.assert_allclose(art_tt[1], phys_tt[1], rtol=1e-7)  # TT at phi = pi
     # R away from phi = 0: same cos(phi/2) shape up to the dropped Fresnel factor
-    phi = jnp.linspace(0.2, 3.0, 8)
+    phi = jnp.linspace(0.2, 3.0, 21)
     z = jnp.zeros_like(phi)
     ratio = np.asarray(_slobes(a, z, z, phi))[0, :, 0] / np.asarray(_mlobes(mp, z, z, phi))[0, :, 0]
     from appearance_jax.optics.fresnel import fresnel_dielectric
@@ -249,9 +251,10 @@ def test_dual_gradients_and_finite():
         p = S.Params(beta_r=x[0], gamma_tt=x[1], intensity_tt=x[2])
         return jnp.sum(DS._dual_kernel(p, d, wi, wo, 3.0, 0.3))
 
-    f = jax.jit(f)
-    testing.assert_gradients(f, jnp.asarray([0.15, 0.5, 1.2]), rtol=1e-5, atol=1e-9, elementwise=True,
-                             name="dual scattering")
+    # grad_fn: the reverse-mode derivative as one compiled program (grad of the jitted f compiles
+    # its forward and backward passes separately)
+    testing.assert_gradients(jax.jit(f), jnp.asarray([0.15, 0.5, 1.2]), rtol=1e-5, atol=1e-9, elementwise=True,
+                             name="dual scattering", grad_fn=jax.jit(jax.grad(f)))
     # axis-aligned / grazing directions stay finite
     wa = fiber_direction(jnp.asarray([np.pi / 2, -np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, 0.0]))
     wb = fiber_direction(jnp.asarray([-np.pi / 2, np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, np.pi]))
