@@ -103,7 +103,8 @@ def test_collision_kernel_gradients_are_unbiased():
                              alpha=x[3], theta=x[4])
 
     x0 = jnp.array([M.c_d, M.w_g, M.g1, M.alpha, M.theta])
-    quad = jax.grad(lambda x: jnp.sum(weight[:, None] * h(w)[:, None] * medium.scattering(make(x), wis, w)))(x0)
+    # jitted: one program instead of the op-by-op gradient's many small ones
+    quad = jax.jit(jax.grad(lambda x: jnp.sum(weight[:, None] * h(w)[:, None] * medium.scattering(make(x), wis, w))))(x0)
     n, n_keys = 2**16, 16
     wi_n = Vec3(*(jnp.full((n,), c) for c in wi))
 
