@@ -390,7 +390,9 @@ def test_thin_film_interface_gives_airy_reflectance():
 def test_gradient_of_smooth_lobe_albedo_matches_finite_differences():
     wi = fiber_direction(0.3, 0.0)
 
+    # (n_h, max_events and n_lobes of the albedo test above: the finite differences run its
+    # compiled trace; lobe 1 is TT whatever the number of events)
     def tt(sigma, eta):
-        return fl.smooth_lobes(fl.fiber(eta, sigma), wi, n_h=64, max_events=4).albedo[1, 0]
+        return fl.smooth_lobes(fl.fiber(eta, sigma), wi, n_h=512, n_lobes=4, max_events=12).albedo[1, 0]
 
     testing.assert_gradients(lambda x: tt(*x), (0.4, 1.55), step=1e-6, rtol=1e-6, mode="fwd", name="TT albedo")
