@@ -273,7 +273,7 @@ def test_inclination_c16():
 
 
 def test_tir_exit_marks_family_invalid():
-    """A strongly deformed section (c_2 = -0.4: an elongated oval) traps some rays: where an
+    """A strongly deformed section (c_2 = 0.4: an elongated oval) traps some rays: where an
     exit is beyond the critical angle that family is invalid and its power goes on. (The
     coefficients padded to 8 and N_RAYS rays: the shape of the other traces, one compilation;
     152 of the 5 x 300 family-rays are trapped.)"""
