@@ -7,17 +7,6 @@ import os
 import shutil
 import tempfile
 
-# The suite is compile-bound: ~90% of its time is XLA:CPU compiling thousands of programs that
-# run once. LLVM's optimisation level changes how fast the machine code runs; what it computes
-# changes at most in the last bits (XLA:CPU compiles without fast-math and its HLO-level
-# optimisations are unaffected; instruction selection, e.g. fused multiply-adds, may differ, so
-# two different programs doing the same arithmetic can differ by an ulp, as they can at any
-# level). At level 0 the suite's CPU time falls by 15-27% (5 compile- and run-heavy tests,
-# docs/testing.md). Users' programs keep XLA's default. Set before jax creates its CPU client;
-# the notebook and README subprocesses inherit it. An explicit level in XLA_FLAGS is kept.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-
 import jax
 import pytest
 
