@@ -122,8 +122,19 @@ def np_dot(a: Vec3, b: Vec3) -> np.ndarray:
     return np.asarray(a.x) * b.x + np.asarray(a.y) * b.y + np.asarray(a.z) * b.z
 
 
-def _pad_len(n: int, chunk: int) -> int:
-    return max(-(-n // chunk), 1) * chunk
+def _flat_padded(components, chunk: int):
+    """Broadcast arrays -> ``(shape, n, flat)``: each flattened and padded with copies of its
+    first element to a multiple of ``chunk`` (at least one chunk)."""
+    shape = np.broadcast_shapes(*(np.shape(c) for c in components))
+    flat = [np.broadcast_to(np.asarray(c), shape).ravel() for c in components]
+    n = flat[0].size
+    total = max(-(-n // chunk), 1) * chunk
+    return shape, n, [np.concatenate([c, np.repeat(c[:1], total - n)]) for c in flat]
+
+
+def _unpad(parts, n: int, shape) -> np.ndarray:
+    out = np.concatenate(parts, axis=0)[:n]
+    return out.reshape(shape + out.shape[1:])
 
 
 def call_chunked(fn, params, wi: Vec3, wo: Vec3, chunk: int = CHUNK) -> np.ndarray:
@@ -134,17 +145,12 @@ def call_chunked(fn, params, wi: Vec3, wo: Vec3, chunk: int = CHUNK) -> np.ndarr
     whatever the caller's sizes. Returns a numpy array of shape
     ``broadcast(wi, wo).shape + fn's trailing axes``.
     """
-    shape = np.broadcast_shapes(*(np.shape(c) for c in (*wi, *wo)))
-    a = [np.broadcast_to(np.asarray(c), shape).ravel() for c in (*wi, *wo)]
-    n = a[0].size
-    total = _pad_len(n, chunk)
-    a = [np.concatenate([c, np.repeat(c[:1], total - n)]) for c in a]
+    shape, n, a = _flat_padded((*wi, *wo), chunk)
     outs = []
-    for i in range(0, total, chunk):  # a few fixed-size batches, not a loop over samples
+    for i in range(0, a[0].size, chunk):  # a few fixed-size batches, not a loop over samples
         sl = [jnp.asarray(c[i:i + chunk]) for c in a]
         outs.append(np.asarray(fn(params, Vec3(*sl[:3]), Vec3(*sl[3:]))))
-    out = np.concatenate(outs, axis=0)[:n]
-    return out.reshape(shape + out.shape[1:])
+    return _unpad(outs, n, shape)
 
 
 def sample_chunked(model, params, wi: Vec3, key, chunk: int = CHUNK):
@@ -154,19 +160,12 @@ def sample_chunked(model, params, wi: Vec3, key, chunk: int = CHUNK):
     ``j`` draws with ``jax.random.fold_in(key, j)``. Returns numpy ``(wo, weight, pdf)`` of
     shapes ``wi.shape`` (components), ``wi.shape + (n_bands,)`` and ``wi.shape``.
     """
-    shape = np.broadcast_shapes(*(np.shape(c) for c in wi))
-    a = [np.broadcast_to(np.asarray(c), shape).ravel() for c in wi]
-    n = a[0].size
-    total = _pad_len(n, chunk)
-    a = [np.concatenate([c, np.repeat(c[:1], total - n)]) for c in a]
+    shape, n, a = _flat_padded(tuple(wi), chunk)
     key = as_key(key)
-    wos, weights, pdfs = [], [], []
-    for j, i in enumerate(range(0, total, chunk)):
+    outs = []  # per chunk: wo.x, wo.y, wo.z, weight, pdf
+    for j, i in enumerate(range(0, a[0].size, chunk)):
         wo, weight, pdf = model.sample(params, Vec3(*(jnp.asarray(c[i:i + chunk]) for c in a)),
                                        jax.random.fold_in(key, j))
-        wos.append([np.asarray(c) for c in wo])
-        weights.append(np.asarray(weight))
-        pdfs.append(np.asarray(pdf))
-    wo = Vec3(*(np.concatenate([w[k] for w in wos])[:n].reshape(shape) for k in range(3)))
-    weight = np.concatenate(weights)[:n]
-    return wo, weight.reshape(shape + weight.shape[1:]), np.concatenate(pdfs)[:n].reshape(shape)
+        outs.append([np.asarray(v) for v in (*wo, weight, pdf)])
+    x, y, z, weight, pdf = (_unpad([o[k] for o in outs], n, shape) for k in range(5))
+    return Vec3(x, y, z), weight, pdf
