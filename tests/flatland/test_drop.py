@@ -371,16 +371,8 @@ def test_single_family():
     s = np.linspace(-0.9, 0.9, N_RAYS)                 # the shape of test_inclination_c16
     f1 = trace_drop(pc.beard_chuang(0.7), N_WATER, s=s, families=1)
     f3 = trace_drop(pc.beard_chuang(0.7), N_WATER, s=s, families=F_SHARED)
-    # the same arithmetic in two compiled programs: integers (foci, axis, valid) equal, floats
-    # equal up to the contraction / ordering freedom of the compiler, a few ulp (bitwise equal at
-    # XLA's default backend level; 1 ulp apart at --xla_backend_optimization_level=0)
-    tol = 4 * np.finfo(np.float64).eps
     for a, b in zip(f1[1:], f3[1:]):
-        a, b = np.asarray(a), np.asarray(b)[:1]
-        if np.issubdtype(a.dtype, np.inexact):
-            np.testing.assert_allclose(a, b, rtol=tol, atol=tol)
-        else:
-            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b)[:1])
 
 
 def test_foci_of_a_flattened_drop_equal_neighbour_crossings():
