@@ -96,6 +96,10 @@ GRID: dict[str, list[Case]] = {
     # with common random numbers vs finite differences) are in tests/bsdf/test_cosmetics.py and
     # tests/layered/test_random_walk.py
     "cosmetics": [Case("dewy1", dict(preset="dewy1"))],
+    # deterministic solver: tilted platelets, oriented, under a dielectric over an RGB base
+    "cosmetics_ordinates": [Case("tilted_interface_base", dict(c_d=0.7, alpha=0.3, theta=0.3, thickness=2.0,
+                                                               base_reflectance=(0.2, 0.5, 0.9), eta=1.4,
+                                                               azimuth="fixed"))],
     # Sadeghi's cloth (BRDF form, not reciprocal: cos theta_i(t) / N.w_i; tests/bsdf/test_cloth.py checks
     # f_s, M and P). T = 4 tangent samples keep it cheap (presets: SLOW_GRID); the default energy gate
     # incident_cosine="patch" keeps the albedo <= 1 at grazing incidence (the thesis' formula does not)
@@ -202,6 +206,7 @@ SLOW_GRID: dict[str, list[Case]] = {
                     for a in (1.0, 0.5, 0.3) for t in (0.0, 0.6, 1.4)]
     + [Case(name, dict(preset=name), lossless=True, opts=_FINE) for name in ("dewy1", "matte1")],
     "cosmetics": [Case(name, dict(preset=name)) for name in ("dewy2", "matte1", "matte2")],
+    "cosmetics_ordinates": [Case(name, dict(preset=name)) for name in ("dewy1", "matte2")],
     "cloth": [Case(name, dict(importlib.import_module("appearance_jax.bsdf.cloth.presets").kwargs(name),
                               n_samples=16), opts=_FINE)
               for name in ("linen_plain", "silk_crepe_de_chine", "silk_shot", "polyester_satin_back", "velvet")]

@@ -15,7 +15,7 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 from __future__ import annotations
 
 from .bcsdf import chiang, huang, marschner, sadeghi, thread
-from .bsdf import cloth, cosmetics, iridescent, lambert, rough_conductor, rough_dielectric, rough_plastic, snake
+from .bsdf import cloth, cosmetics, cosmetics_ordinates, iridescent, lambert, rough_conductor, rough_dielectric, rough_plastic, snake
 from .bsdf.sum import sum_model
 from .core.model import Model
 from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes, tabulated
@@ -28,6 +28,7 @@ _MODELS: tuple[Model, ...] = (
     iridescent.MODEL,
     snake.MODEL,
     cosmetics.MODEL,
+    cosmetics_ordinates.MODEL,
     cloth.MODEL,
     cloth.weaves.MODEL,
     henyey_greenstein.MODEL,

@@ -54,11 +54,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..core.linalg import solve_diagonally_dominant
 from ..core.params import ParamSpec, check_int, check_value
 from ..core.quadrature import gauss_legendre
 from ..core.special import atan2
 from ..core.vec import Vec3
+from .kernel_ops import (Op as _Op, add as _add, cmul as _cmul, double as _double, left as _left, phi as _phi,
+                         resolvent as _resolvent, right as _right)
 
 DEFAULT_NODES = 24
 DEFAULT_FOURIER = 24
@@ -161,75 +162,8 @@ def _phase_modes(chi, lam):
     return pR, pT
 
 
-def _phi(x):
-    """(1 - e^{-x}) / x with the limit 1 at x = 0 (finite value and derivative)."""
-    small = jnp.abs(x) < 1e-6
-    xs = jnp.where(small, 1.0, x)
-    return jnp.where(small, 1.0 - 0.5 * x + x * x / 6.0, -jnp.expm1(-xs) / xs)
-
-
 # ------------------------------------------------------------------------------------
-# adding / doubling on kernels (index order [out, in]; c: quadrature measure, 0 on queries)
-
-
-class _Op(NamedTuple):
-    R: Any  # reflection, illuminated from above        (M, N, N)
-    T: Any  # diffuse transmission, downwards           (M, N, N)
-    Rs: Any  # reflection, illuminated from below
-    Ts: Any  # diffuse transmission, upwards
-    e: Any  # direct-beam attenuation exp(-t/μ)          (N,)
-
-
-def _cmul(A, B, c, n):
-    """Kernel of the composed operator, A C B: the inner sum over the n quadrature nodes only."""
-    return jnp.einsum("...ij,j,...jk->...ik", A[..., :, :n], c[:n], B[..., :n, :])
-
-
-def _resolvent(A, B, c, n):
-    """(I - A C B C)^{-1} A, with the linear solve on the quadrature block only.
-
-    Rows at the quadrature nodes: (I - S_QQ C_Q) Y_Q = A_Q with S = A C B; rows at the
-    zero-weight query nodes then follow explicitly, Y_X = A_X + S_XQ C_Q Y_Q (their
-    columns of S C vanish, so they never enter the solve).
-    """
-    S = _cmul(A, B, c, n)
-    SC = S[..., :, :n] * c[:n]
-    eye = jnp.eye(n, dtype=S.dtype)
-    YQ = solve_diagonally_dominant(eye - SC[..., :n, :], A[..., :n, :])
-    YX = A[..., n:, :] + SC[..., n:, :] @ YQ
-    return jnp.concatenate([YQ, YX], axis=-2)
-
-
-def _left(e, T, X, c, n):
-    """(E + T C) X: transmission applied on the out side of a kernel."""
-    return e[:, None] * X + _cmul(T, X, c, n)
-
-
-def _right(X, e, T, c, n):
-    """X (E + C T): transmission applied on the in side of a kernel."""
-    return X * e[None, :] + _cmul(X, T, c, n)
-
-
-def _add(top: _Op, bot: _Op, c, n) -> _Op:
-    """Adding equations (module docstring): ``top`` over ``bot``."""
-    W = _resolvent(bot.R, top.Rs, c, n)  # (I - R2 C R1* C)^{-1} R2
-    V = _resolvent(top.Rs, bot.R, c, n)  # (I - R1* C R2 C)^{-1} R1*
-    R = top.R + _left(top.e, top.Ts, _right(W, top.e, top.T, c, n), c, n)
-    T = (bot.e[:, None] * top.T + bot.T * top.e[None, :] + _cmul(bot.T, top.T, c, n)
-         + _left(bot.e, bot.T, _right(_cmul(V, bot.R, c, n), top.e, top.T, c, n), c, n))
-    Rs = bot.Rs + _left(bot.e, bot.T, _right(V, bot.e, bot.Ts, c, n), c, n)
-    Ts = (top.e[:, None] * bot.Ts + top.Ts * bot.e[None, :] + _cmul(top.Ts, bot.Ts, c, n)
-          + _left(top.e, top.Ts, _right(_cmul(W, top.Rs, c, n), bot.e, bot.Ts, c, n), c, n))
-    return _Op(R, T, Rs, Ts, top.e * bot.e)
-
-
-def _double(R, T, e, c, n):
-    """One doubling step of an up-down symmetric slab (R = R*, T = T*, so W = V): one solve."""
-    W = _resolvent(R, R, c, n)
-    R2 = R + _left(e, T, _right(W, e, T, c, n), c, n)
-    T2 = (e[:, None] * T + T * e[None, :] + _cmul(T, T, c, n)
-          + _left(e, T, _right(_cmul(W, R, c, n), e, T, c, n), c, n))
-    return R2, T2, e * e
+# one slab (the kernel algebra is in .kernel_ops)
 
 
 def _slab(albedo, thickness, chi, lam, mu, c, n, n_doublings):

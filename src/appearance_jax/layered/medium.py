@@ -127,10 +127,16 @@ def scattering(m, wi: Vec3, wo: Vec3):
     (wi, wo): the reciprocity of the medium, f(w -> wo) sigma_s(w) = f(wo -> w) sigma_s(wo)
     [T:710].
     """
+    return scattering_coefficient(m, wi, wo) / with_bands(extinction(m, wi))
+
+
+def scattering_coefficient(m, wi: Vec3, wo: Vec3):
+    """sigma_s(wi) f(wi -> wo) = sigma_t(wi) Lambda(wi) f(wi -> wo) [1/sr per mfp], bands last:
+    ``Lambda_d c_d f_d + Lambda_p (1 - c_d) D(wh) / 4``, symmetric in (wi, wo) (the medium's
+    reciprocity, [T:710]); the kernel of a deterministic transport solver."""
     cd = with_bands(m.c_d)
-    num = (jnp.asarray(m.albedo_d) * cd * with_bands(diffuser_phase(m, wi, wo))
-           + jnp.asarray(m.albedo_p) * (1.0 - cd) * with_bands(0.25 * platelet_D(m, wi, wo)))
-    return num / with_bands(extinction(m, wi))
+    return (jnp.asarray(m.albedo_d) * cd * with_bands(diffuser_phase(m, wi, wo))
+            + jnp.asarray(m.albedo_p) * (1.0 - cd) * with_bands(0.25 * platelet_D(m, wi, wo)))
 
 
 def phase(m, wi: Vec3, wo: Vec3):

@@ -1,0 +1,88 @@
+"""Kernel algebra of adding-doubling: composition, resolvents, adding and doubling of slab
+operators on a discrete-ordinates node list (shared by :mod:`.adding_doubling` and
+:mod:`.ordinates`).
+
+A kernel ``K[..., out, in]`` (1/sr) on the node cosines ``mu`` (the first ``n`` carry the
+quadrature measure ``c = 2 pi mu w``, the rest are zero-weight query cosines whose rows and
+columns are computed explicitly, never solved for) maps incident radiance to outgoing
+radiance by ``L_out = sum_j K[out, j] c_j L_in[j]``. A slab is an :class:`Op`: diffuse
+reflection and transmission kernels from above (R, T) and from below (Rs, Ts), and the
+direct-beam attenuation ``e`` carried as a diagonal, never as a kernel. Leading axes (Fourier
+modes, bands) broadcast. Equations: van de Hulst (1980), "Multiple Light Scattering", Ch. 5
+and 14, written out in docs/cosmetics.md.
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax.numpy as jnp
+
+from ..core.linalg import solve_diagonally_dominant
+
+
+def phi(x):
+    """(1 - e^{-x}) / x with the limit 1 at x = 0 (finite value and derivative)."""
+    small = jnp.abs(x) < 1e-6
+    xs = jnp.where(small, 1.0, x)
+    return jnp.where(small, 1.0 - 0.5 * x + x * x / 6.0, -jnp.expm1(-xs) / xs)
+
+
+class Op(NamedTuple):
+    R: Any  # reflection, illuminated from above        (M, N, N)
+    T: Any  # diffuse transmission, downwards           (M, N, N)
+    Rs: Any  # reflection, illuminated from below
+    Ts: Any  # diffuse transmission, upwards
+    e: Any  # direct-beam attenuation exp(-t/μ)          (N,)
+
+
+def cmul(A, B, c, n):
+    """Kernel of the composed operator, A C B: the inner sum over the n quadrature nodes only."""
+    return jnp.einsum("...ij,j,...jk->...ik", A[..., :, :n], c[:n], B[..., :n, :])
+
+
+def resolvent(A, B, c, n):
+    """(I - A C B C)^{-1} A, with the linear solve on the quadrature block only.
+
+    Rows at the quadrature nodes: (I - S_QQ C_Q) Y_Q = A_Q with S = A C B; rows at the
+    zero-weight query nodes then follow explicitly, Y_X = A_X + S_XQ C_Q Y_Q (their
+    columns of S C vanish, so they never enter the solve).
+    """
+    S = cmul(A, B, c, n)
+    SC = S[..., :, :n] * c[:n]
+    eye = jnp.eye(n, dtype=S.dtype)
+    YQ = solve_diagonally_dominant(eye - SC[..., :n, :], A[..., :n, :])
+    YX = A[..., n:, :] + SC[..., n:, :] @ YQ
+    return jnp.concatenate([YQ, YX], axis=-2)
+
+
+def left(e, T, X, c, n):
+    """(E + T C) X: transmission applied on the out side of a kernel."""
+    return e[:, None] * X + cmul(T, X, c, n)
+
+
+def right(X, e, T, c, n):
+    """X (E + C T): transmission applied on the in side of a kernel."""
+    return X * e[None, :] + cmul(X, T, c, n)
+
+
+def add(top: Op, bot: Op, c, n) -> Op:
+    """Adding equations (module docstring): ``top`` over ``bot``."""
+    W = resolvent(bot.R, top.Rs, c, n)  # (I - R2 C R1* C)^{-1} R2
+    V = resolvent(top.Rs, bot.R, c, n)  # (I - R1* C R2 C)^{-1} R1*
+    R = top.R + left(top.e, top.Ts, right(W, top.e, top.T, c, n), c, n)
+    T = (bot.e[:, None] * top.T + bot.T * top.e[None, :] + cmul(bot.T, top.T, c, n)
+         + left(bot.e, bot.T, right(cmul(V, bot.R, c, n), top.e, top.T, c, n), c, n))
+    Rs = bot.Rs + left(bot.e, bot.T, right(V, bot.e, bot.Ts, c, n), c, n)
+    Ts = (top.e[:, None] * bot.Ts + top.Ts * bot.e[None, :] + cmul(top.Ts, bot.Ts, c, n)
+          + left(top.e, top.Ts, right(cmul(W, top.Rs, c, n), bot.e, bot.Ts, c, n), c, n))
+    return Op(R, T, Rs, Ts, top.e * bot.e)
+
+
+def double(R, T, e, c, n):
+    """One doubling step of an up-down symmetric slab (R = R*, T = T*, so W = V): one solve."""
+    W = resolvent(R, R, c, n)
+    R2 = R + left(e, T, right(W, e, T, c, n), c, n)
+    T2 = (e[:, None] * T + T * e[None, :] + cmul(T, T, c, n)
+          + left(e, T, right(cmul(W, R, c, n), e, T, c, n), c, n))
+    return R2, T2, e * e
