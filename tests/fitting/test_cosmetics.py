@@ -1,4 +1,6 @@
-"""fitting/cosmetics.py runs end to end on a coarse table (the full runs are in fitting/README.md)."""
+"""fitting/cosmetics.py: the deterministic default (solver ``cosmetics_ordinates`` fitted to tables
+made by the random walk) on a coarse table; the Monte Carlo path (``--solver walk``) in the slow
+tests (the full runs are in fitting/README.md)."""
 
 import importlib.util
 import os
@@ -10,8 +12,8 @@ import pytest
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
-def _load():
-    spec = importlib.util.spec_from_file_location("cosmetics_recipe", os.path.join(ROOT, "fitting", "cosmetics.py"))
+def _load(name="cosmetics"):
+    spec = importlib.util.spec_from_file_location(f"{name}_recipe", os.path.join(ROOT, "fitting", f"{name}.py"))
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
@@ -26,23 +28,52 @@ def float32():
     jax.config.update("jax_enable_x64", old)
 
 
+def test_cosmetics_ordinates_recipe_recovers_cd_and_albedo_quick(float32, tmp_path):
+    """Matte 1 on the coarse in-plane table (theta_i 0..60 step 20, theta_o every 20 deg, missing cells
+    emulated: 90 values) made by the WALK (1024 paths x 256 steps: MC error ~4 % per cell, folded into
+    sigma with the 2 % noise), fitted with the deterministic solver at 8 cosines x 8 modes (f within
+    0.4 % of 24 x 24 on this layout: far below the per-cell sigma); c_d and albedo_d (RGB) free.
+
+    Asserts: the four values are identified at the truth (1-sigma < 5 % of their range); LM lowers the
+    chi-square by > 10x from the 15 %-off start to chi2/N < 1 + 5 sqrt(2/N) (the noise-only spread of
+    chi2/N is sqrt(2/N) = 0.15) and no higher than at the truth (to one unit of chi2: LM reaches the optimum); each value
+    within 3 sigma of the truth; the results and the identifiability table are written."""
+    mod = _load()
+    rows, s, idn, res = mod.run_case("matte1", "inplane", free=("c_d", "albedo_d"), gen_samples=1024,
+                                     custom_layout=mod.quick_layout(), settings=dict(n_nodes=8, n_modes=8),
+                                     max_steps=30, progress=print)
+    assert set(idn["identified"]) == {"c_d", "albedo_d[R]", "albedo_d[G]", "albedo_d[B]"}, idn
+    n = s["n_valid"]
+    assert n == 90 and res.converged, s
+    assert s["loss_lm"] < s["loss_start"] / 10, s
+    assert s["loss_lm"] < 1 + 5 * np.sqrt(2 / n), s
+    assert s["loss_lm"] <= s["loss_truth"] + 1.0 / n, s  # within one unit of the total chi-square
+    for r in rows:
+        assert abs(r["z"]) < 3.0, r
+    md = mod.write_results(rows, [s], [idn], str(tmp_path))
+    assert (tmp_path / "results.csv").exists() and (tmp_path / "identifiability.json").exists()
+    assert "c_d" in md and "singular values" in md
+
+
 @pytest.mark.slow  # 80 s; notebooks/04_cosmetics.ipynb runs a gradient vs derivative-free fit by default
 def test_cosmetics_recipe_recovers_cd_and_alpha_quick(tmp_path, float32):
-    """Matte 1 on a coarse in-plane table (theta_i 0..60 step 20, theta_o every 20 deg, missing cells
-    emulated), 2 % noise stated as sigma, c_d and alpha free (the rest at the truth), LM with common
-    random numbers (64 paths x 64 steps; the frozen MC error folded into the weights; at 32 paths the
-    CRN fit of c_d is biased by ~9 % (z ~ -6): the loss then favours parameters of lower MC variance).
+    """The Monte Carlo path (``--solver walk``): Matte 1 on the coarse in-plane table, 2 % noise stated
+    as sigma, c_d and alpha free (the rest at the truth), LM with common random numbers (64 paths x 64
+    steps; the frozen MC error folded into the weights; at 32 paths the CRN fit of c_d is biased by
+    ~9 % (z ~ -6): the loss then favours parameters of lower MC variance).
 
     Asserts: LM lowers the chi-square by > 3x from the 15 %-off start to a reduced
     chi-square < 3; c_d and alpha come back within 4 sigma and 10 % of the truth with informative
     sigmas; Powell on the same CRN objective reaches a loss within 30 % of LM's; the table and the
     result files are written.
     """
-    mod = _load()
-    rows, s, res = mod.run_case("matte1", free=("c_d", "alpha"), samples=64, bounces=64, gen_samples=512,
-                                gen_bounces=64, max_steps=40, powell_maxfev=80, layout=mod.quick_layout(),
-                                fresh_keys=1, truncation=False, cov_samples=0, out=None, progress=print)
-    md = mod.write_results(rows, [s], str(tmp_path))
+    _load()  # puts fitting/ on the path
+    walk = _load("cosmetics_walk")
+    data = _load("cosmetics_data")
+    rows, s, res = walk.run_case("matte1", free=("c_d", "alpha"), samples=64, bounces=64, gen_samples=512,
+                                 gen_bounces=64, max_steps=40, powell_maxfev=80, custom_layout=data.quick_layout(),
+                                 fresh_keys=1, truncation=False, cov_samples=0, out=None, progress=print)
+    md = walk.write_results(rows, [s], str(tmp_path))
     assert (tmp_path / "results.csv").exists() and "c_d" in md and "Powell" in md
     assert s["lm_iterations"] >= 2, s
     assert s["loss_lm"] < s["loss_start"] / 3 and s["loss_lm"] < 3.0, s
@@ -57,9 +88,10 @@ def test_cosmetics_recipe_recovers_cd_and_alpha_quick(tmp_path, float32):
 
 @pytest.mark.slow
 def test_cosmetics_recipe_cli_quick_all_free(tmp_path, float32):
-    """The command line in --quick mode with all 12 parameters free writes results and a report."""
+    """The command line in --quick mode with all 12 parameters free writes results and a report,
+    for the Monte Carlo path (``--solver walk``)."""
     mod = _load()
-    rows, sums = mod.main(["--quick", "--cases", "matte1", "--out", str(tmp_path), "--no-plots"])
+    rows, sums = mod.main(["--solver", "walk", "--quick", "--cases", "matte1", "--out", str(tmp_path)])
     assert len(rows) == 12 and sums[0]["lm_converged"]
     assert sums[0]["loss_lm"] < sums[0]["loss_start"]
-    assert (tmp_path / "results.md").exists() and (tmp_path / "matte1" / "params.json").exists()
+    assert (tmp_path / "results.md").exists() and (tmp_path / "matte1_inplane_walk" / "params.json").exists()
