@@ -79,6 +79,9 @@ class Params(medium.Params):
                           doc="'averaged' over rotations about the normal, or 'fixed' (tilt about x)")
     n_nodes: int = static(24, convert=integer(4, 96), doc="Gauss-Legendre polar cosines per hemisphere")
     n_modes: int = static(24, convert=integer(1, 96), doc="azimuthal Fourier modes")
+    tilt_correction: bool = static(True, choices=(True, False),
+                                   doc="correct the multiply scattered light of tilted platelets from their azimuth "
+                                       "mixture to the oriented medium (a coarse full-azimuth solve)")
 
     def _validate(self):
         for name in ("albedo_d", "albedo_p", "base_reflectance"):
@@ -94,7 +97,8 @@ class Params(medium.Params):
 
 
 def settings(p: Params) -> ordinates.Settings:
-    return ordinates.Settings(n_nodes=p.n_nodes, n_modes=p.n_modes, n_az=max(192, 8 * p.n_modes))
+    return ordinates.Settings(n_nodes=p.n_nodes, n_modes=p.n_modes, n_az=max(192, 8 * p.n_modes),
+                              tilt=p.tilt_correction)
 
 
 def resolution_error(p: Params):

@@ -33,7 +33,12 @@ class Op(NamedTuple):
     T: Any  # diffuse transmission, downwards           (M, N, N)
     Rs: Any  # reflection, illuminated from below
     Ts: Any  # diffuse transmission, upwards
-    e: Any  # direct-beam attenuation exp(-t/μ)          (N,)
+    e: Any  # direct-beam attenuation exp(-t/μ)          (N,), light travelling down
+    es: Any = None  # the same for light travelling up (None: equal to e, an up-down symmetric medium)
+
+    @property
+    def e_up(self):
+        return self.e if self.es is None else self.es
 
 
 def cmul(A, B, c, n):
@@ -70,13 +75,15 @@ def add(top: Op, bot: Op, c, n) -> Op:
     """Adding equations (module docstring): ``top`` over ``bot``."""
     W = resolvent(bot.R, top.Rs, c, n)  # (I - R2 C R1* C)^{-1} R2
     V = resolvent(top.Rs, bot.R, c, n)  # (I - R1* C R2 C)^{-1} R1*
-    R = top.R + left(top.e, top.Ts, right(W, top.e, top.T, c, n), c, n)
+    # e: the direct beam travelling down, e_up: travelling up (they differ in an oriented medium)
+    R = top.R + left(top.e_up, top.Ts, right(W, top.e, top.T, c, n), c, n)
     T = (bot.e[:, None] * top.T + bot.T * top.e[None, :] + cmul(bot.T, top.T, c, n)
          + left(bot.e, bot.T, right(cmul(V, bot.R, c, n), top.e, top.T, c, n), c, n))
-    Rs = bot.Rs + left(bot.e, bot.T, right(V, bot.e, bot.Ts, c, n), c, n)
-    Ts = (top.e[:, None] * bot.Ts + top.Ts * bot.e[None, :] + cmul(top.Ts, bot.Ts, c, n)
-          + left(top.e, top.Ts, right(cmul(W, top.Rs, c, n), bot.e, bot.Ts, c, n), c, n))
-    return Op(R, T, Rs, Ts, top.e * bot.e)
+    Rs = bot.Rs + left(bot.e, bot.T, right(V, bot.e_up, bot.Ts, c, n), c, n)
+    Ts = (top.e_up[:, None] * bot.Ts + top.Ts * bot.e_up[None, :] + cmul(top.Ts, bot.Ts, c, n)
+          + left(top.e_up, top.Ts, right(cmul(W, top.Rs, c, n), bot.e_up, bot.Ts, c, n), c, n))
+    es = None if top.es is None and bot.es is None else top.e_up * bot.e_up
+    return Op(R, T, Rs, Ts, top.e * bot.e, es)
 
 
 def double(R, T, e, c, n):

@@ -77,6 +77,7 @@ from ..core.special import atan2, safe_sqrt
 from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric
 from . import medium as med
+from . import ordinates_tilt
 from .kernel_ops import Op, add, double, left, phi, resolvent, right
 
 
@@ -91,6 +92,9 @@ class Settings(NamedTuple):
     n_az: int = 192
     n_rot: int = 16
     n_doublings: int = 20
+    tilt: bool = True
+    tilt_mu: int = 6
+    tilt_phi: int = 12
 
     def check(self):
         for name, lo in (("n_nodes", 2), ("n_modes", 1), ("n_rot", 1), ("n_doublings", 0)):
@@ -213,10 +217,12 @@ def _base_modes(base, mu, s: Settings, dtype):
 
 
 class Solution(NamedTuple):
-    """The multiply scattered Fourier kernels on the nodes (B, M, N, N) and the node cosines."""
+    """The multiply scattered Fourier kernels on the nodes (B, M, N, N), the node cosines, and
+    the tilt correction on its coarse grid (:mod:`.ordinates_tilt`; None when switched off)."""
 
     ms: Any
     mu: Any
+    tilt: Any = None
 
 
 def _solve(media, thickness, base, eta, mu_x, s: Settings):
@@ -265,9 +271,36 @@ def _interface_weights(nodes, eta, dtype, n_fine: int = 48):
 
 @partial(jax.jit, static_argnames=("s", "base_kind"))
 def _solution(media, thickness, base_value, eta, s: Settings, base_kind: str):
-    R, ss = _solve(media, thickness, (base_kind, base_value), eta, jnp.zeros((0,), thickness.dtype), s)
+    dtype = thickness.dtype
+    R, ss = _solve(media, thickness, (base_kind, base_value), eta, jnp.zeros((0,), dtype), s)
     x, _ = gauss_legendre(s.n_nodes, 0.0, 1.0)
-    return Solution(R - ss, jnp.asarray(x, thickness.dtype))
+    tilt = None
+    if s.tilt:
+        xc, _ = gauss_legendre(s.tilt_mu, 0.0, 1.0)
+        W = None if eta is None else _interface_weights(np.asarray(xc), eta, dtype)
+        tilt, _ = ordinates_tilt.correction(media, thickness, partial(_base_grid, (base_kind, base_value)), W, dtype,
+                                            s.tilt_mu, s.tilt_phi)
+    return Solution(R - ss, jnp.asarray(x, dtype), tilt)
+
+
+def _base_grid(base, mu, az):
+    """The base BSDF (B, N, N) [out, in] between the directions of a full (mu, az) grid, light
+    arriving travelling down along (mu, az), leaving up (propagation azimuths)."""
+    kind, value = base
+    N = mu.shape[0]
+    if kind == "lambert":
+        rho = jnp.atleast_1d(jnp.asarray(value, mu.dtype))
+        return jnp.broadcast_to((rho / np.pi)[:, None, None], (rho.shape[0], N, N))
+    model, params = value
+    s = jnp.sqrt(1.0 - mu * mu)
+    wi = Vec3(-s * jnp.cos(az), -s * jnp.sin(az), mu)  # away from the surface, back along the light
+    wo = Vec3(s * jnp.cos(az), s * jnp.sin(az), mu)
+    shape = (N, N)
+    wi = Vec3(*(jnp.broadcast_to(v[None, :], shape).ravel() for v in wi))
+    wo = Vec3(*(jnp.broadcast_to(v[:, None], shape).ravel() for v in wo))
+    f = jnp.asarray(model.eval.kernel(params, wi, wo), mu.dtype)
+    f = f.reshape(shape + ((f.shape[-1],) if f.ndim == 2 else (1,)))
+    return jnp.moveaxis(f, -1, 0)
 
 
 # ------------------------------------------------------------------------------------
@@ -306,7 +339,7 @@ def _single_query(media, thickness, base, wi_in: Vec3, wo_in: Vec3, dtype):
     else:
         model, params = value
         fb = jnp.asarray(model.eval.kernel(params, wi_in, wo_in), dtype)
-        fb = fb if fb.ndim == 2 else fb[:, None]
+        fb = fb if fb.ndim == mi.ndim + 1 else fb[..., None]
     return total + with_bands(ti * to) * fb
 
 
@@ -341,15 +374,17 @@ def _brdf(media, thickness, base_value, eta, wi: Vec3, wo: Vec3, sol: Solution, 
     cosm = jnp.cos(dphi[:, None] * m[None, :]) * np.where(m == 0, 1.0, 2.0)
     f = jnp.einsum("qkm,qm->qk", ms, cosm)
     base = (base_kind, base_value)
-    if averaged:
-        ss = 0.0
-        for g in _rotations(s.n_rot):
-            cg, sg = math.cos(g), math.sin(g)
-            rot = lambda w: Vec3(cg * w.x - sg * w.y, sg * w.x + cg * w.y, w.z)  # noqa: E731
-            ss = ss + _single_query(media, thickness, base, rot(wi_in), rot(wo_in), dtype)
-        ss = ss / s.n_rot
+    if averaged:  # over rotations of the sample: a leading rotation axis
+        g = jnp.asarray(_rotations(s.n_rot), dtype)[:, None]
+        cg, sg = jnp.cos(g), jnp.sin(g)
+        rot = lambda w: Vec3(cg * w.x - sg * w.y, sg * w.x + cg * w.y, jnp.broadcast_to(w.z, cg.shape[:1] + w.z.shape))  # noqa: E731
+        ss = jnp.mean(_single_query(media, thickness, base, rot(wi_in), rot(wo_in), dtype), axis=0)
     else:
         ss = _single_query(media, thickness, base, wi_in, wo_in, dtype)
+    if sol.tilt is not None:
+        f = f + ordinates_tilt.evaluate(sol.tilt, np.asarray(gauss_legendre(s.tilt_mu, 0.0, 1.0)[0]),
+                                        wi_in.z, atan2(-wi.y, -wi.x), wo_in.z, atan2(wo.y, wo.x), _lagrange,
+                                        averaged, s.tilt_phi)
     f = (f + ss) * with_bands(factor)
     return jnp.where(with_bands(ok), f, 0.0)
 
