@@ -10,11 +10,12 @@ numbers every call. It is the fitting path of cosmetic foundations; the random w
 (``cosmetics``) is its reference.
 
 Accuracy (docs/cosmetics.md, tests/bsdf/test_cosmetics_ordinates.py): within 3 standard
-errors of the walk (16k paths, ~0.5 %) for Dewy 1, Dewy 2, Matte 1 and untilted media with an
-interface or a base; ~1e-5 against the HG adding-doubling reference. The platelet tilt
+errors of the walk (16-32k paths, ~0.3-0.5 %) for the four Table A.1 presets and for two
+layers with an interface over a base; ~1e-5 against the HG adding-doubling reference. The platelet tilt
 theta_p enters exactly in single scattering; the multiply scattered light is that of the
-tilt's azimuth mixture (module :mod:`~appearance_jax.layered.ordinates`), which differs from
-the walk by a few percent only at large tilts (Matte 2, theta_p = 52 deg: +2..5 %).
+tilt's azimuth mixture plus a correction to the oriented medium from a coarse full-azimuth
+solve (:mod:`~appearance_jax.layered.ordinates_tilt`; Matte 2, theta_p = 52 deg: +3..5 %
+without it, within 3 standard errors with it).
 
 | parameter        | default | range     | unit | meaning                                             |
 |------------------|---------|-----------|------|-----------------------------------------------------|

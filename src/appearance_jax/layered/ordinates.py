@@ -21,9 +21,10 @@ Method.
   has one reflection and one transmission kernel. Single scattering — the sharp part, the
   platelets' highlight — is computed exactly for the oriented medium at the query directions
   (``azimuth="fixed"``) or exactly averaged over sample rotations (``"averaged"``, the
-  in-plane measurement of an unoriented sample, decision D4); only the multiply scattered
-  remainder comes from the mixture. Its deviation from the walk at theta_p > 0 is measured
-  (docs/cosmetics.md), and it vanishes at theta_p = 0.
+  in-plane measurement of an unoriented sample, decision D4). The multiply scattered
+  remainder comes from the mixture, plus (``tilt``, default on) the difference between the
+  oriented medium and its mixture from a coarse full-azimuth solve (:mod:`.ordinates_tilt`;
+  docs/cosmetics.md). At theta_p = 0 the mixture is the medium and the correction vanishes.
 - **The kernels.** sigma_s f of the mixture (:func:`.medium.scattering_coefficient`) is
   evaluated on the node cosines x an azimuth grid of ``n_az`` points, averaged over the
   rotations and reduced to ``n_modes`` cosine modes by a discrete Fourier sum; the
@@ -56,6 +57,8 @@ Method.
 | n_az        | 192     | azimuth samples of a kernel before the Fourier sum (>= 2 n_modes)    |
 | n_rot       | 16      | rotations of a tilted platelet population in the mixture / averages  |
 | n_doublings | 20      | doublings of the starting layer (t0 = t 2^-K)                        |
+| tilt        | True    | add the oriented-minus-mixture correction (:mod:`.ordinates_tilt`)   |
+| tilt_mu, tilt_phi | 6, 12 | the correction's coarse grid (cosines, azimuths; tilt_phi even)  |
 
 Accuracy of the defaults against the walk and against finer settings: docs/cosmetics.md.
 Directions at or below the horizon give 0 (finite gradients).
@@ -97,12 +100,15 @@ class Settings(NamedTuple):
     tilt_phi: int = 12
 
     def check(self):
-        for name, lo in (("n_nodes", 2), ("n_modes", 1), ("n_rot", 1), ("n_doublings", 0)):
+        for name, lo in (("n_nodes", 2), ("n_modes", 1), ("n_rot", 1), ("n_doublings", 0), ("tilt_mu", 2),
+                         ("tilt_phi", 4)):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
                 raise ValueError(f"ordinates: {name} = {v!r} must be an integer >= {lo}")
         if not isinstance(self.n_az, (int, np.integer)) or self.n_az < 2 * self.n_modes:
             raise ValueError(f"ordinates: n_az = {self.n_az!r} must be an integer >= 2 n_modes = {2 * self.n_modes}")
+        if self.tilt_phi % 2:
+            raise ValueError(f"ordinates: tilt_phi = {self.tilt_phi} must be even (the grid pairs phi with phi + pi)")
         return self
 
 
