@@ -84,11 +84,16 @@ class Params(medium.Params):
                           doc="'fixed' sample, or 'averaged' over rotations about the normal")
 
     def _validate(self):
-        for name in ("albedo_d", "albedo_p", "base_reflectance"):
-            v = np.atleast_1d(np.asarray(getattr(self, name)))
-            if v.shape[-1] not in (1, N_BANDS):
-                raise ValueError(f"cosmetics.Params.{name} has {v.shape[-1]} values on its trailing (band) axis: "
-                                 f"give a scalar or {N_BANDS} (linear RGB)")
+        check_bands(self, "cosmetics")
+
+
+def check_bands(p, model: str):
+    """The band fields of a cosmetic layer hold a scalar or N_BANDS values (linear RGB)."""
+    for name in ("albedo_d", "albedo_p", "base_reflectance"):
+        v = np.atleast_1d(np.asarray(getattr(p, name)))
+        if v.shape[-1] not in (1, N_BANDS):
+            raise ValueError(f"{model}.Params.{name} has {v.shape[-1]} values on its trailing (band) axis: "
+                             f"give a scalar or {N_BANDS} (linear RGB)")
 
 
 def _stack(layers: Sequence[Params]):

@@ -61,7 +61,7 @@ from ..core.rng import uniforms
 from ..core.vec import Vec3
 from ..layered import medium, ordinates
 from ..phase.henyey_greenstein import hg_value
-from .cosmetics import N_BANDS, TABLE_A1
+from .cosmetics import N_BANDS, TABLE_A1, check_bands
 
 AZIMUTH_MODES = ("averaged", "fixed")
 #: relative energy error of the discretised diffuser phase function above which Params warns
@@ -85,11 +85,7 @@ class Params(medium.Params):
                                        "mixture to the oriented medium (a coarse full-azimuth solve)")
 
     def _validate(self):
-        for name in ("albedo_d", "albedo_p", "base_reflectance"):
-            v = np.atleast_1d(np.asarray(getattr(self, name)))
-            if v.shape[-1] not in (1, N_BANDS):
-                raise ValueError(f"cosmetics_ordinates.Params.{name} has {v.shape[-1]} values on its trailing "
-                                 f"(band) axis: give a scalar or {N_BANDS} (linear RGB)")
+        check_bands(self, "cosmetics_ordinates")
         err = resolution_error(self)
         if err is not None and err > RESOLUTION_WARN:
             warnings.warn(f"cosmetics_ordinates: n_nodes = {self.n_nodes}, n_modes = {self.n_modes} resolve the "
