@@ -56,7 +56,7 @@ Method.
 | n_modes     | 24      | azimuthal Fourier modes of the multiply scattered light              |
 | n_az        | 192     | azimuth samples of a kernel before the Fourier sum (>= 2 n_modes)    |
 | n_rot       | 16      | rotations of a tilted platelet population in the mixture / averages  |
-| n_doublings | 20      | doublings of the starting layer (t0 = t 2^-K)                        |
+| n_doublings | 24      | doublings of the starting layer (t0 = t 2^-K)                        |
 | tilt        | True    | add the oriented-minus-mixture correction (:mod:`.ordinates_tilt`)   |
 | tilt_mu, tilt_phi | 6, 12 | the correction's coarse grid (cosines, azimuths; tilt_phi even)  |
 
@@ -94,7 +94,7 @@ class Settings(NamedTuple):
     n_modes: int = 24
     n_az: int = 192
     n_rot: int = 16
-    n_doublings: int = 20
+    n_doublings: int = 24
     tilt: bool = True
     tilt_mu: int = 6
     tilt_phi: int = 12
