@@ -130,7 +130,6 @@ def identifiability(name, table, *, free=FREE, settings=None, progress=print):
     out = dict(case=name, truth=np.asarray(x, np.float64).tolist(), **analyse(J, r, prob.space.labels, n),
                jacobian_time=time.perf_counter() - t0)  # compile included
     out["chi2_truth"] = out.pop("chi2")
-    out["_Ju"] = J * ranges(prob.space.labels)[None, :]  # kept in memory for cross-layout checks
     progress(f"  identifiability: s = {np.array2string(np.asarray(out['s']), precision=3, max_line_width=200)}; "
              f"chi2/N at the truth {out['chi2_truth']:.3f}; not identified: {', '.join(out['not_identified']) or '-'}"
              f" ({out['jacobian_time']:.1f} s)")
@@ -241,24 +240,45 @@ def _fmt_flat(flat):
     return "; ".join(one(d) for d in flat) or "none"
 
 
+def _direction(i, k):
+    """Right singular vector k of an identifiability record, sign-fixed, with its dominant components."""
+    v = np.asarray(i["Vt"])[k]
+    v = v * np.sign(v[np.argmax(np.abs(v))])
+    order = np.argsort(-np.abs(v))
+    return v, dict(s=float(i["s"][k]), exact=bool(i["s"][k] < EXACT_REL * i["s"][0]),
+                   components={i["labels"][j]: round(float(v[j]), 3) for j in order if abs(v[j]) > MEMBER})
+
+
 def cross_layout(idents):
-    """Markdown rows: each in-plane flat direction v of a case, |J_u v| under its other layouts
-    (chi^2 rises by |J_u v|^2 for a move of one range along v; > 1: that layout resolves it)."""
+    """Markdown: per case and layout, sigma / range of every parameter at the truth; then the two
+    weakest in-plane directions v and |J_u v| under each layout (chi^2 rises by |J_u v|^2 for a move
+    of one range along v: the singular value under that layout; J_u^T J_u = V S^2 V^T of the record)."""
     by = {(i["case"], i["layout"]): i for i in idents}
-    lines = []
+    lays = [lay for lay in LAYOUTS if any(k[1] == lay for k in by)]
+    lines = ["", "σ / range at the truth (`σ` from (JᵀJ)⁻¹ of the whitened residuals; **bold**: identified, < 5 %; "
+             "inf: in an exactly flat direction):", "",
+             "| case | layout | " + " | ".join(by[next(iter(by))]["labels"]) + " |",
+             "|---|---|" + "---|" * len(by[next(iter(by))]["labels"])]
     for (case, lay), i in by.items():
-        if lay != "inplane" or not i["flat"]:
+        cells = [f"**{r:.3f}**" if r < IDENTIFIED_REL else f"{r:.3g}" for r in i["sigma_rel"]]
+        lines.append(f"| {case} | {lay} | " + " | ".join(cells) + " |")
+    rows = []
+    for (case, lay), i in by.items():
+        if lay != "inplane":
             continue
-        others = [o for o in ("gonio", "combined") if (case, o) in by and "_Ju" in by[(case, o)]]
-        if not others:
-            continue
-        Vt = np.asarray(i["Vt"])
-        for k, d in enumerate(i["flat"]):
-            v = Vt[len(i["s"]) - len(i["flat"]) + k]
-            lines.append(f"| {case} | {_fmt_flat([d])} | " + " | ".join(
-                f"{o} {np.linalg.norm(by[(case, o)]['_Ju'] @ v):.3g}" for o in others) + " |")
-    if lines:
-        lines = ["", "| case | in-plane flat direction | \\|J_u v\\| under the other layouts |", "|---|---|---|"] + lines
+        n_exact = sum(1 for k in range(len(i["s"])) if i["s"][k] < EXACT_REL * i["s"][0])
+        for k in range(len(i["s"]) - 1 - n_exact, len(i["s"]) - 1 - n_exact - 2, -1):
+            v, d = _direction(i, k)
+            norms = []
+            for o in lays:
+                if (case, o) in by:
+                    oi = by[(case, o)]
+                    norms.append(f"{o} {np.sqrt(np.sum((np.asarray(oi['s']) * (np.asarray(oi['Vt']) @ v)) ** 2)):.3g}")
+            rows.append(f"| {case} | {_fmt_flat([d])} | " + ", ".join(norms) + " |")
+    if rows:
+        lines += ["", "The weakest in-plane directions (the exactly flat one left out) and their singular value "
+                  "\\|J_u v\\| under each layout:", "", "| case | in-plane direction v: s (components > 0.3) | "
+                  "\\|J_u v\\| per layout |", "|---|---|---|"] + rows
     return lines
 
 
@@ -271,7 +291,7 @@ def write_results(rows, summaries, idents, out):
     with open(os.path.join(out, "summary.json"), "w") as fh:
         json.dump(summaries, fh, indent=1)
     with open(os.path.join(out, "identifiability.json"), "w") as fh:
-        json.dump([{k: v for k, v in i.items() if not k.startswith("_")} for i in idents], fh, indent=1)
+        json.dump(idents, fh, indent=1)
     lines = ["| case | layout | parameter | truth | start | LM fit ± 1σ | z | σ (bounds held) | σ at truth | "
              "identified | Powell | flag |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -297,6 +317,14 @@ def write_results(rows, summaries, idents, out):
     return md
 
 
+def _num(v):
+    try:
+        float(v)
+        return True
+    except ValueError:
+        return False
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--solver", choices=("ordinates", "walk"), default="ordinates")
@@ -319,10 +347,23 @@ def main(argv=None):
     ap.add_argument("--no-mc-weights", action="store_true", help="walk: the table's sigma alone")
     ap.add_argument("--plots", action="store_true", help="report figures per case (slow)")
     ap.add_argument("--x64", action="store_true", help="float64 (default float32)")
+    ap.add_argument("--report-only", action="store_true", help="rewrite results.md from the files in --out")
     ap.add_argument("--quick", action="store_true", help="coarse in-plane table, small generator: a smoke run")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cache-dir", default=None, help="JAX persistent compilation cache")
     args = ap.parse_args(argv)
+    if args.report_only:
+        import csv as _csv
+
+        with open(os.path.join(args.out, "results.csv")) as fh:
+            rows = [{k: (v == "True" if v in ("True", "False") else float(v) if _num(v) else v) for k, v in r.items()}
+                    for r in _csv.DictReader(fh)]
+        with open(os.path.join(args.out, "summary.json")) as fh:
+            sums = json.load(fh)
+        with open(os.path.join(args.out, "identifiability.json")) as fh:
+            idents = json.load(fh)
+        print(write_results(rows, sums, idents, args.out))
+        return rows, sums
     import jax
 
     if args.x64:
@@ -362,6 +403,8 @@ def main(argv=None):
                 sums.append(s)
         print(walk.write_results(rows, sums, args.out))
         return rows, sums
+    from appearance_jax.fit.solve import reuse
+
     rows, sums, idents = [], [], []
     for lay in layouts:  # layouts outer: the presets of one layout share its compiled programs
         for name in cases:
@@ -374,6 +417,12 @@ def main(argv=None):
             rows += r
             sums.append(s)
             idents.append(i)
+            write_results(rows, sums, idents, args.out)  # after every case: a crash keeps what is done
+        # every compiled XLA:CPU executable holds memory mappings; 11 fits of this model in one process reached
+        # the kernel's limit ("LLVM ERROR: Unable to allocate section memory"): let them go between layouts
+        # (the persistent compilation cache keeps the programs on disk; the presets of a layout share them)
+        jax.clear_caches()
+        reuse.clear()
     print(write_results(rows, sums, idents, args.out))
     return rows, sums
 

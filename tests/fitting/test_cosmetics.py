@@ -95,3 +95,29 @@ def test_cosmetics_recipe_cli_quick_all_free(tmp_path, float32):
     assert len(rows) == 12 and sums[0]["lm_converged"]
     assert sums[0]["loss_lm"] < sums[0]["loss_start"]
     assert (tmp_path / "results.md").exists() and (tmp_path / "matte1_inplane_walk" / "params.json").exists()
+
+
+def test_cosmetics_identifiability_dewy1_g2_exactly_flat(float32):
+    """Dewy 1 has w_g = 1 (Padron Table A.1): the second HG lobe carries no weight, so its asymmetry g2
+    drops out of f exactly. The recipe's identifiability analysis (whitened Jacobian at the truth, SVD
+    in range units) must find exactly one exactly flat direction, along g2, and nothing else flat: on
+    the coarse in-plane layout with sigma = 2 % of the solver's own f (8 cosines x 8 modes, no walk),
+    the smallest singular value is below 1e-6 of the largest with |v_g2| > 0.99, the next one above 1
+    (chi^2 changes by more than 1 over a whole range along every other direction), and g2 is the one
+    parameter reported with an infinite sigma."""
+    mod = _load()
+    data = _load("cosmetics_data")
+    from appearance_jax.bsdf import cosmetics_ordinates as co
+
+    table, _, _ = data._empty_table("inplane", data.quick_layout())
+    wi, wo = table.directions()
+    f = np.asarray(co.eval(mod._truth("dewy1", dict(n_nodes=8, n_modes=8)), wi, wo), np.float64)
+    table = table.replace(values=f, sigma=0.02 * f, mask=np.ones_like(f, bool))
+    idn, _, _ = mod.identifiability("dewy1", table, settings=dict(n_nodes=8, n_modes=8))
+    s = np.asarray(idn["s"])
+    v = np.asarray(idn["Vt"])[-1]
+    g2 = idn["labels"].index("g2")
+    assert s[-1] < 1e-6 * s[0] and abs(v[g2]) > 0.99, (s, v)
+    assert s[-2] > 1.0, s
+    assert [lab for lab, r in zip(idn["labels"], idn["sigma_rel"]) if not np.isfinite(r)] == ["g2"], idn
+    assert idn["chi2_truth"] < 1e-6, idn  # the table is the solver's own f
