@@ -41,8 +41,8 @@ def test_cosmetics_ordinates_recipe_recovers_cd_and_albedo_quick(float32, tmp_pa
 
     Asserts: the four values are identified at the truth (1-sigma < 5 % of their range); LM lowers the
     chi-square by > 10x from the 15 %-off start to chi2/N < 1 + 5 sqrt(2/N) (the noise-only spread of
-    chi2/N is sqrt(2/N) = 0.15) and no higher than at the truth (to one unit of chi2: LM reaches the optimum); each value
-    within 3 sigma of the truth; the results and the identifiability table are written."""
+    chi2/N is sqrt(2/N) = 0.15) and no higher than at the truth (to one unit of chi2: LM reaches the
+    optimum); each value within 3 sigma of the truth; the results and the identifiability table are written."""
     mod = _load()
     rows, s, idn, res = mod.run_case("matte1", "inplane", free=("c_d", "albedo_d"), gen_samples=1024,
                                      custom_layout=mod.quick_layout(), settings=QUICK, max_steps=30, progress=print)

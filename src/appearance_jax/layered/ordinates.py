@@ -57,6 +57,7 @@ Method.
 | n_az        | 192     | azimuth samples of a kernel before the Fourier sum (>= 2 n_modes)    |
 | n_rot       | 16      | rotations of a tilted platelet population in the mixture / averages  |
 | n_doublings | 24      | doublings of the starting layer (t0 = t 2^-K)                        |
+| n_rot_single | 128    | sample rotations of the exact single scattering ("averaged")         |
 | tilt        | True    | add the oriented-minus-mixture correction (:mod:`.ordinates_tilt`)   |
 | tilt_mu, tilt_phi | 6, 12 | the correction's coarse grid (cosines, azimuths; tilt_phi even)  |
 
@@ -95,13 +96,14 @@ class Settings(NamedTuple):
     n_az: int = 192
     n_rot: int = 16
     n_doublings: int = 24
+    n_rot_single: int = 128
     tilt: bool = True
     tilt_mu: int = 6
     tilt_phi: int = 12
 
     def check(self):
-        for name, lo in (("n_nodes", 2), ("n_modes", 1), ("n_rot", 1), ("n_doublings", 0), ("tilt_mu", 2),
-                         ("tilt_phi", 4)):
+        for name, lo in (("n_nodes", 2), ("n_modes", 1), ("n_rot", 1), ("n_rot_single", 1), ("n_doublings", 0),
+                         ("tilt_mu", 2), ("tilt_phi", 4)):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
                 raise ValueError(f"ordinates: {name} = {v!r} must be an integer >= {lo}")
@@ -335,7 +337,7 @@ def _single_query(media, thickness, base, wi_in: Vec3, wo_in: Vec3, dtype):
         m = _layer(media, k)
         si, so = med.extinction(m, wi_in), med.extinction(m, wo_in)
         x = si / mi + so / mo
-        layer = -jnp.expm1(-thickness[k] * x) / (x * mi * mo)
+        layer = -jnp.expm1(-thickness[k] * x) / (si * mo + so * mi)  # / (x mi mo), finite at grazing
         total = total + with_bands(ti * to * layer) * med.scattering_coefficient(m, wi_in, wo_in)
         ti = ti * jnp.exp(-thickness[k] * si / mi)
         to = to * jnp.exp(-thickness[k] * so / mo)
@@ -381,9 +383,10 @@ def _brdf(media, thickness, base_value, eta, wi: Vec3, wo: Vec3, sol: Solution, 
     f = jnp.einsum("qkm,qm->qk", ms, cosm)
     base = (base_kind, base_value)
     if averaged:  # over rotations of the sample: a leading rotation axis
-        g = jnp.asarray(_rotations(s.n_rot), dtype)[:, None]
+        g = jnp.asarray(_rotations(s.n_rot_single), dtype)[:, None]
         cg, sg = jnp.cos(g), jnp.sin(g)
-        rot = lambda w: Vec3(cg * w.x - sg * w.y, sg * w.x + cg * w.y, jnp.broadcast_to(w.z, cg.shape[:1] + w.z.shape))  # noqa: E731
+        rot = lambda w: Vec3(cg * w.x - sg * w.y, sg * w.x + cg * w.y,  # noqa: E731
+                             jnp.broadcast_to(w.z, cg.shape[:1] + w.z.shape))
         ss = jnp.mean(_single_query(media, thickness, base, rot(wi_in), rot(wo_in), dtype), axis=0)
     else:
         ss = _single_query(media, thickness, base, wi_in, wo_in, dtype)
@@ -397,8 +400,9 @@ def _brdf(media, thickness, base_value, eta, wi: Vec3, wo: Vec3, sol: Solution, 
 
 def _refract_in(w: Vec3, eta):
     """The direction inside the host that leaves along ``w`` (pointing away), and F(mu)."""
-    sin2 = (w.x * w.x + w.y * w.y) / (eta * eta)
-    mu_in = safe_sqrt(1.0 - sin2)
+    # mu_in^2 = 1 - (1 - mu^2)/eta^2 written without the cancellation of 1 - sin^2 (at eta = 1 it is mu
+    # exactly; a grazing direction must not round to mu_in = 0 in float32)
+    mu_in = safe_sqrt(eta * eta - 1.0 + w.z * w.z) / eta
     F, _, _, _ = fresnel_dielectric(w.z, eta)
     return Vec3(w.x / eta, w.y / eta, mu_in), F
 

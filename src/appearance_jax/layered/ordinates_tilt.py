@@ -132,7 +132,8 @@ def _ms(media, thickness, Rb, W, mu, az, c, n, n_doublings, rotations, n_phi):
         sig_dn = sig[opposite]  # sigma is even: down at (mu, phi) = up at (mu, phi + pi)
         op = _slab(K, sig, sig_dn, thickness[k], mu, c, n, n_doublings)
         x = (sig / mu)[:, None] + (sig_dn / mu)[None, :]
-        ss = ss + (up[:, None] * dn[None, :]) * K["R"] * (-jnp.expm1(-thickness[k] * x) / (x * mu[:, None] * mu[None, :]))
+        single = -jnp.expm1(-thickness[k] * x) / (x * mu[:, None] * mu[None, :])
+        ss = ss + (up[:, None] * dn[None, :]) * K["R"] * single
         up, dn = up * op.e_up, dn * op.e
         stack = op if stack is None else add(stack, op, c, n)
     ss = ss + up[:, None] * dn[None, :] * Rb
