@@ -120,8 +120,7 @@ class Settings(NamedTuple):
 
 def _dirs(mu, phi_, up: bool) -> Vec3:
     """Unit vectors at polar cosine ``mu`` (> 0) and azimuth ``phi_``, upward or downward."""
-    s = jnp.sqrt(jnp.maximum(1.0 - mu * mu, 0.0))
-    return Vec3(s * jnp.cos(phi_), s * jnp.sin(phi_), mu if up else -mu)
+    return ordinates_tilt.direction(mu, phi_, up)
 
 
 def _rotations(n_rot: int):
@@ -147,13 +146,18 @@ def resolvable_alpha(alpha, s: Settings):
     return jnp.sqrt(jnp.sqrt(alpha**4 + a_min**4))
 
 
+def _fourier_table(s: Settings, dtype):
+    """(M, A): cos(m dphi_a) / n_az, the discrete Fourier sum of a kernel sampled at n_az azimuths."""
+    a = (2.0 * np.pi / s.n_az) * np.arange(s.n_az)
+    return jnp.asarray(np.cos(np.arange(s.n_modes)[:, None] * a[None, :]) / s.n_az, dtype)
+
+
 def _mixture_kernels(m, mu, s: Settings):
     """Fourier modes of sigma_s f of the azimuth mixture, ``(S_R, S_T)`` of shape (B, M, N, N)
     [out, in] in the propagation convention (light arrives travelling down at mu_in, leaves
     travelling up (R) or down (T) at mu_out), and the mixture's extinction sigma(mu) (N,)."""
     m = m.replace(alpha=resolvable_alpha(m.alpha, s))
-    cosm = np.cos(np.arange(s.n_modes)[:, None] * (2.0 * np.pi / s.n_az) * np.arange(s.n_az)[None, :]) / s.n_az
-    cosm = jnp.asarray(cosm, mu.dtype)
+    cosm = _fourier_table(s, mu.dtype)
     gam = _rotations(s.n_rot)[:, None, None, None]
     dphi = (2.0 * np.pi / s.n_az) * np.arange(s.n_az)[None, :, None, None]
     mo = mu[None, None, :, None]
@@ -220,8 +224,7 @@ def _base_modes(base, mu, s: Settings, dtype):
     wo = Vec3(*(jnp.broadcast_to(v, shape).ravel() for v in wo))
     f = jnp.asarray(model.eval.kernel(params, wi, wo), dtype)
     f = f.reshape(shape + ((f.shape[-1],) if f.ndim == 2 else (1,)))
-    cosm = np.cos(np.arange(s.n_modes)[:, None] * (2.0 * np.pi / s.n_az) * np.arange(s.n_az)[None, :]) / s.n_az
-    return jnp.einsum("ma,aoib->bmoi", jnp.asarray(cosm, dtype), f)
+    return jnp.einsum("ma,aoib->bmoi", _fourier_table(s, dtype), f)
 
 
 class Solution(NamedTuple):
@@ -384,9 +387,10 @@ def _brdf(media, thickness, base_value, eta, wi: Vec3, wo: Vec3, sol: Solution, 
     base = (base_kind, base_value)
     if averaged:  # over rotations of the sample: a leading rotation axis
         g = jnp.asarray(_rotations(s.n_rot_single), dtype)[:, None]
-        cg, sg = jnp.cos(g), jnp.sin(g)
-        rot = lambda w: Vec3(cg * w.x - sg * w.y, sg * w.x + cg * w.y,  # noqa: E731
-                             jnp.broadcast_to(w.z, cg.shape[:1] + w.z.shape))
+
+        def rot(w):
+            return ordinates_tilt.rotate_z(Vec3(w.x, w.y, jnp.broadcast_to(w.z, g.shape[:1] + w.z.shape)), g)
+
         ss = jnp.mean(_single_query(media, thickness, base, rot(wi_in), rot(wo_in), dtype), axis=0)
     else:
         ss = _single_query(media, thickness, base, wi_in, wo_in, dtype)
@@ -455,6 +459,11 @@ def brdf(media, thickness, wi: Vec3, wo: Vec3, *, base=None, eta=None, azimuth: 
     if azimuth not in ("averaged", "fixed"):
         raise ValueError(f"ordinates: azimuth = {azimuth!r} must be 'averaged' or 'fixed'")
     media, thickness, base, eta, s = _prepare(media, thickness, base, eta, settings)
+    return _evaluate(media, thickness, base, eta, wi, wo, azimuth, s, solution)
+
+
+def _evaluate(media, thickness, base, eta, wi, wo, azimuth, s, solution=None):
+    """Solve (unless given a solution) and evaluate at broadcast directions; ``base`` = (kind, value)."""
     if solution is None:
         solution = _solution(media, thickness, base[1], eta, s, base[0])
     shape = jnp.broadcast_shapes(jnp.shape(wi.x), jnp.shape(wo.x))
@@ -482,9 +491,5 @@ def brdf_traced(media, thickness, wi: Vec3, wo: Vec3, *, base, eta, azimuth: str
     """:func:`brdf` without validation, for use inside a model's kernel (parameters may be
     traced): ``base`` a Lambertian albedo array (bands) or ``(model, params)``, ``eta`` an array
     (1: index-matched; the interface then reflects nothing) or None."""
-    kind, value = ("model", base) if isinstance(base, tuple) else ("lambert", base)
-    sol = _solution(media, thickness, value, eta, settings, kind)
-    shape = jnp.broadcast_shapes(jnp.shape(wi.x), jnp.shape(wo.x))
-    flat = lambda w: Vec3(*(jnp.broadcast_to(jnp.asarray(v, thickness.dtype), shape).ravel() for v in w))  # noqa: E731
-    f = _brdf(media, thickness, value, eta, flat(wi), flat(wo), sol, settings, kind, azimuth == "averaged")
-    return f.reshape(shape + f.shape[-1:])
+    base = ("model", base) if isinstance(base, tuple) else ("lambert", base)
+    return _evaluate(media, thickness, base, eta, wi, wo, azimuth, settings)

@@ -41,12 +41,14 @@ def _grid(n_mu, n_phi, dtype):
     return jnp.asarray(mu, dtype), jnp.asarray(az, dtype), jnp.asarray(c, dtype), x
 
 
-def _vec(mu, az, up):
-    s = jnp.sqrt(1.0 - mu * mu)
+def direction(mu, az, up: bool) -> Vec3:
+    """Unit vector at polar cosine ``mu`` (> 0) and azimuth ``az``, travelling up or down."""
+    s = jnp.sqrt(jnp.maximum(1.0 - mu * mu, 0.0))
     return Vec3(s * jnp.cos(az), s * jnp.sin(az), mu if up else -mu)
 
 
-def _rot(w: Vec3, g) -> Vec3:
+def rotate_z(w: Vec3, g) -> Vec3:
+    """w rotated by the angle g (radians, broadcasts) about the normal z."""
     c, s = jnp.cos(g), jnp.sin(g)
     return Vec3(c * w.x - s * w.y, s * w.x + c * w.y, w.z)
 
@@ -59,12 +61,12 @@ def _kernels(m, mu, az, c, rotations, n_phi):
     g = jnp.asarray(np.asarray(rotations, float), mu.dtype)[:, None, None]  # a leading rotation axis
     out = {}
     for name, in_up, out_up in (("R", False, True), ("T", False, False), ("Rs", True, False), ("Ts", True, True)):
-        d_in = _vec(mu[None, :], az[None, :], in_up)
+        d_in = direction(mu[None, :], az[None, :], in_up)
         wi = Vec3(-d_in.x, -d_in.y, -d_in.z)
-        wo = _vec(mu[:, None], az[:, None], out_up)
-        S = jnp.mean(med.scattering_coefficient(m, _rot(wi, g), _rot(wo, g)), axis=0)
+        wo = direction(mu[:, None], az[:, None], out_up)
+        S = jnp.mean(med.scattering_coefficient(m, rotate_z(wi, g), rotate_z(wo, g)), axis=0)
         out[name] = jnp.moveaxis(S, -1, 0)
-    w = _rot(_vec(mu, az, True), g[:, :, 0])
+    w = rotate_z(direction(mu, az, True), g[:, :, 0])
     ext = med.extinction(m, w)
     sig = jnp.mean(ext, axis=0)
     sig_s = jnp.moveaxis(jnp.mean(med.albedo(m, w) * ext[..., None], axis=0), -1, 0)  # (B, N), even in w
