@@ -241,3 +241,53 @@ def test_random_walk_agreement_two_layers_interface_base():
                   bottom=Bottom(lambert.MODEL, lambert.Params(reflectance=RHO)), n_samples=8192, max_bounces=256)
     z = (f - np.asarray(fw)) / np.asarray(se)
     assert np.all(np.abs(z) < 3.5), z
+
+
+def test_tilt_grid_algebra_modes_and_mirror_doubling():
+    """The tilt correction's two shortcuts against the dense operators they replace: (1) a
+    rotation-invariant grid kernel composes per azimuthal mode (the mixture's solve), (2) an
+    oriented slab doubled with Rs = P R P, Ts = P T P (P: azimuth + pi) equals the general
+    adding equations (kernel_ops.add with all four kernels and both direct beams)."""
+    from appearance_jax.layered import kernel_ops as ko
+    from appearance_jax.layered import ordinates_tilt as ot
+
+    with jax.enable_x64(True):
+        n_mu, n_phi = 3, 8
+        mu, az, c, x = ot._grid(n_mu, n_phi, jnp.float64)
+        rng = np.random.default_rng(7)
+
+        def even_kappa():
+            k = rng.uniform(size=(1, n_mu, n_mu, n_phi))
+            return jnp.asarray(0.5 * (k + k[..., (-np.arange(n_phi)) % n_phi]))  # kappa(-k) = kappa(k)
+
+        a, b = even_kappa(), even_kappa()
+        np.testing.assert_allclose(np.asarray(ot.rotation_average(ot._expand(a, n_phi), n_mu, n_phi)), np.asarray(a),
+                                   atol=1e-15)
+        c_x = c.reshape(n_mu, n_phi)[:, 0]
+        dense = ko.cmul(ot._expand(a, n_phi), ot._expand(b, n_phi), c, n_mu * n_phi)
+        modes = ko.cmul(ot._to_modes(a), ot._to_modes(b), c_x, n_mu)
+        np.testing.assert_allclose(np.asarray(ot._expand(ot._from_modes(modes, n_phi), n_phi)), np.asarray(dense),
+                                   rtol=1e-12, atol=1e-14)
+
+        # (2) a tilted layer on a 3 x 6 grid
+        n_mu, n_phi = 3, 6
+        mu, az, c, _ = ot._grid(n_mu, n_phi, jnp.float64)
+        m = od._layer(media([dict(theta=0.9, alpha=0.4)]), 0)
+        K, ext, sig_s = ot._raw_kernels(m, mu, az)
+        K = ot._balance(K, sig_s, c / mu, n_mu, n_phi)
+        opp = ot._opposite(n_mu, n_phi)
+        np.testing.assert_allclose(np.asarray(K["Rs"]), np.asarray(K["R"][:, opp][:, :, opp]), rtol=1e-10)
+        t, levels, n = 3.0, 10, n_mu * n_phi
+        fast = ot._slab(K, ext, t, mu, c, n, levels, opp)
+        a_up, a_dn = ext / mu, ext[opp] / mu
+        t0 = t * 2.0 ** (-levels)
+        inv = t0 / (mu[:, None] * mu[None, :])
+        r = lambda ao, ai: inv * ko.phi(t0 * (ao[:, None] + ai[None, :]))  # noqa: E731
+        tr = lambda ao, ai: jnp.exp(-t0 * ao)[:, None] * inv * ko.phi(t0 * (ai[None, :] - ao[:, None]))  # noqa: E731
+        op = ko.Op(K["R"] * r(a_up, a_dn), K["T"] * tr(a_dn, a_dn), K["Rs"] * r(a_dn, a_up), K["Ts"] * tr(a_up, a_up),
+                   jnp.exp(-t0 * a_dn), jnp.exp(-t0 * a_up))
+        for level in range(levels):
+            op = ko.add(op, op, c, n)
+        for name in ("R", "T", "Rs", "Ts", "e", "es"):
+            np.testing.assert_allclose(np.asarray(getattr(fast, name)), np.asarray(getattr(op, name)), rtol=1e-9,
+                                       atol=1e-12, err_msg=name)

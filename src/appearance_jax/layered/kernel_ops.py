@@ -16,6 +16,7 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+import jax
 import jax.numpy as jnp
 
 from ..core.linalg import solve_diagonally_dominant
@@ -93,3 +94,25 @@ def double(R, T, e, c, n):
     T2 = (e[:, None] * T + T * e[None, :] + cmul(T, T, c, n)
           + left(e, T, right(cmul(W, R, c, n), e, T, c, n), c, n))
     return R2, T2, e * e
+
+
+def doubled_slab(SR, ST, sig, t, mu, c, n, K):
+    """Op of one up-down symmetric slab t thick: the exact single scattering of a layer t 2^-K
+    thick (reflection kernel ``SR``, transmission ``ST``: sigma_s f, extinction ``sig`` per
+    cosine), doubled K times."""
+    a = sig / mu
+    t0 = t * 2.0 ** (-K)
+    ao, ai = a[:, None], a[None, :]
+    inv = t0 / (mu[:, None] * mu[None, :])
+    R0 = SR * (inv * phi(t0 * (ao + ai)))
+    T0 = ST * (jnp.exp(-t0 * ao) * inv * phi(t0 * (ai - ao)))
+
+    def step(carry, level):
+        R, T = carry
+        e = jnp.exp(-(t0 * 2.0**level) * a)  # afresh at every level (see adding_doubling._slab)
+        R2, T2, _ = double(R, T, e, c, n)
+        return (R2, T2), None
+
+    (R, T), _ = jax.lax.scan(step, (R0, T0), jnp.arange(K, dtype=mu.dtype))
+    e = jnp.exp(-t * a)
+    return Op(R, T, R, T, e)

@@ -82,7 +82,7 @@ from ..core.vec import Vec3
 from ..optics.fresnel import fresnel_dielectric
 from . import medium as med
 from . import ordinates_tilt
-from .kernel_ops import Op, add, double, left, phi, resolvent, right
+from .kernel_ops import add, doubled_slab, left, resolvent, right
 
 
 ALPHA_GRID_SCALE = 2.0  # resolvable platelet roughness x n_nodes (resolvable_alpha)
@@ -181,26 +181,6 @@ def _mixture_kernels(m, mu, s: Settings):
     return modes(True), modes(False), sig
 
 
-def _slab(SR, ST, sig, t, mu, c, n, K):
-    """Op of one slab: exact single scattering in a layer t 2^-K thick, doubled K times."""
-    a = sig / mu
-    t0 = t * 2.0 ** (-K)
-    ao, ai = a[:, None], a[None, :]
-    inv = t0 / (mu[:, None] * mu[None, :])
-    R0 = SR * (inv * phi(t0 * (ao + ai)))
-    T0 = ST * (jnp.exp(-t0 * ao) * inv * phi(t0 * (ai - ao)))
-
-    def step(carry, level):
-        R, T = carry
-        e = jnp.exp(-(t0 * 2.0**level) * a)  # afresh at every level (see adding_doubling._slab)
-        R2, T2, _ = double(R, T, e, c, n)
-        return (R2, T2), None
-
-    (R, T), _ = jax.lax.scan(step, (R0, T0), jnp.arange(K, dtype=mu.dtype))
-    e = jnp.exp(-t * a)
-    return Op(R, T, R, T, e)
-
-
 def _single_nodes(SR, sig, t, mu):
     """Single scattering of one slab over nothing on the nodes (modes), the exact closed form."""
     a = sig / mu
@@ -249,7 +229,7 @@ def _solve(media, thickness, base, eta, mu_x, s: Settings):
     stack, ss, above = None, 0.0, jnp.ones_like(mu)
     for k in range(L):
         SR, ST, sig = _mixture_kernels(_layer(media, k), mu, s)
-        op = _slab(SR, ST, sig, thickness[k], mu, c, n, s.n_doublings)
+        op = doubled_slab(SR, ST, sig, thickness[k], mu, c, n, s.n_doublings)
         ss = ss + above[:, None] * above[None, :] * _single_nodes(SR, sig, thickness[k], mu)
         above = above * op.e
         stack = op if stack is None else add(stack, op, c, n)

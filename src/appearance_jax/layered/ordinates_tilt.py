@@ -27,7 +27,7 @@ import numpy as np
 from ..core.quadrature import gauss_legendre
 from ..core.vec import Vec3
 from . import medium as med
-from .kernel_ops import Op, add, left, phi, resolvent, right
+from .kernel_ops import Op, add, cmul, doubled_slab, left, phi, resolvent, right
 
 ALPHA_MIN = 0.25  # resolvable platelet roughness of the coarse grid (cf. ordinates.resolvable_alpha)
 
@@ -53,25 +53,58 @@ def rotate_z(w: Vec3, g) -> Vec3:
     return Vec3(c * w.x - s * w.y, s * w.x + c * w.y, w.z)
 
 
-def _kernels(m, mu, az, c, rotations, n_phi):
-    """sigma_s f on the grid for the four in/out combinations and sigma(w) per direction,
-    averaged over the given rotations of the platelets (one rotation 0: the oriented medium),
-    each column scaled to the exact sigma_s of its incident direction (below).
-    Returns a dict of (B, N, N) [out, in] and the (N,) extinction (even: up = down)."""
-    g = jnp.asarray(np.asarray(rotations, float), mu.dtype)[:, None, None]  # a leading rotation axis
+def _raw_kernels(m, mu, az):
+    """sigma_s f of the oriented medium between the grid's directions for the four in/out
+    combinations (dict of (B, N, N) [out, in]), the extinction (N,) and sigma_s (B, N) per
+    direction (even: up = down)."""
     out = {}
     for name, in_up, out_up in (("R", False, True), ("T", False, False), ("Rs", True, False), ("Ts", True, True)):
         d_in = direction(mu[None, :], az[None, :], in_up)
         wi = Vec3(-d_in.x, -d_in.y, -d_in.z)
         wo = direction(mu[:, None], az[:, None], out_up)
-        S = jnp.mean(med.scattering_coefficient(m, rotate_z(wi, g), rotate_z(wo, g)), axis=0)
-        out[name] = jnp.moveaxis(S, -1, 0)
-    w = rotate_z(direction(mu, az, True), g[:, :, 0])
+        out[name] = jnp.moveaxis(med.scattering_coefficient(m, wi, wo), -1, 0)
+    w = direction(mu, az, True)
     ext = med.extinction(m, w)
-    sig = jnp.mean(ext, axis=0)
-    sig_s = jnp.moveaxis(jnp.mean(med.albedo(m, w) * ext[..., None], axis=0), -1, 0)  # (B, N), even in w
-    out = _balance(out, sig_s, c / mu, mu.shape[0] // n_phi, n_phi)
-    return out, sig
+    sig_s = jnp.moveaxis(med.albedo(m, w) * ext[..., None], -1, 0)
+    return out, ext, sig_s
+
+
+def rotation_average(X, n_mu, n_phi):
+    """A grid kernel (B, N, N) [out, in] averaged over the rotations of the sample by the grid's
+    azimuth steps (a rotation permutes the grid): kappa (B, n_mu, n_mu, n_phi) [mu_out, mu_in,
+    k], the kernel of the azimuth mixture at the azimuth difference phi_out - phi_in = k steps."""
+    X4 = jnp.moveaxis(X.reshape(X.shape[0], n_mu, n_phi, n_mu, n_phi), 3, 2)  # [b, mu_o, mu_i, phi_o, phi_i]
+    k, l = np.meshgrid(np.arange(n_phi), np.arange(n_phi), indexing="ij")
+    return jnp.mean(X4[..., (l + k) % n_phi, l], axis=-1)
+
+
+def _expand(kappa, n_phi):
+    """The grid kernel (B, N, N) of a rotation-invariant kappa (B, n_mu, n_mu, n_phi)."""
+    k = (np.arange(n_phi)[:, None] - np.arange(n_phi)[None, :]) % n_phi  # [phi_o, phi_i]
+    X = jnp.moveaxis(kappa[..., k], 2, 3)  # [b, mu_o, phi_o, mu_i, phi_i]
+    B, n_mu = kappa.shape[0], kappa.shape[1]
+    return X.reshape(B, n_mu * n_phi, n_mu * n_phi)
+
+
+def _cosines(n_phi, dtype):
+    """cos(2 pi m k / n_phi), m = 0..n_phi/2 (rows), k = 0..n_phi-1: the real DFT of an even
+    sequence (the mixture is mirror symmetric: kappa(k) = kappa(-k))."""
+    m = np.arange(n_phi // 2 + 1)
+    return jnp.asarray(np.cos(2.0 * np.pi * m[:, None] * np.arange(n_phi)[None, :] / n_phi), dtype)
+
+
+def _to_modes(kappa):
+    """kappa (B, n_mu, n_mu, n_phi) -> azimuthal modes (B, M, n_mu, n_mu): composition of
+    rotation-invariant grid kernels (sum over the grid with weights c) is a product per mode."""
+    return jnp.einsum("mk,boik->bmoi", _cosines(kappa.shape[-1], kappa.dtype), kappa)
+
+
+def _from_modes(K, n_phi):
+    """The inverse of :func:`_to_modes`: modes (B, M, n_mu, n_mu) -> kappa (B, n_mu, n_mu, n_phi)."""
+    w = np.full(n_phi // 2 + 1, 2.0)
+    w[0] = w[-1] = 1.0  # m = 0 and m = n_phi/2 appear once in the full DFT, the others twice
+    cos = _cosines(n_phi, K.dtype) * jnp.asarray(w / n_phi, K.dtype)[:, None]
+    return jnp.einsum("mk,bmoi->boik", cos, K)
 
 
 def _balance(K, sig_s, dw, n_mu, n_phi, n_iter: int = 8):
@@ -90,53 +123,71 @@ def _balance(K, sig_s, dw, n_mu, n_phi, n_iter: int = 8):
     rev = np.concatenate([N + opposite, opposite])  # -d: up <-> down at the opposite azimuth
     target = jnp.concatenate([sig_s, sig_s[:, opposite]], axis=-1)  # sigma_s(-d) = sigma_s(d)
     dwf = jnp.concatenate([dw, dw])
-    b = jnp.ones_like(target)
-    for _ in range(n_iter):
+
+    def sweep(_, b):
         total = jnp.einsum("o,bo,boi->bi", dwf, b[:, rev], full) * b
-        b = b * jnp.sqrt(target / jnp.where(total > 0, total, target))
+        return b * jnp.sqrt(target / jnp.where(total > 0, total, target))
+
+    b = jax.lax.fori_loop(0, n_iter, sweep, jnp.ones_like(target))  # a loop, not unrolled: compile time
     full = b[:, rev][:, :, None] * full * b[:, None, :]
     return {"Ts": full[:, :N, :N], "R": full[:, :N, N:], "Rs": full[:, N:, :N], "T": full[:, N:, N:]}
 
 
-def _slab(K, sig_up, sig_dn, t, mu, c, n, n_doublings):
-    """Op of one oriented slab (up-down asymmetric: the direct beam and the single-scattering
-    start use the extinction of each direction of travel)."""
-    a_up, a_dn = sig_up / mu, sig_dn / mu
+def _slab(K, sig_up, t, mu, c, n, n_doublings, opp):
+    """Op of one oriented slab. Seen from below it is its own image rotated by pi about the
+    normal (the platelets' D is centrally symmetric): Rs = P R P, Ts = P T P and the direct
+    beam travelling up at (mu, phi) is the one travelling down at (mu, phi + pi), P the
+    permutation ``opp``. The doubling carries R and T only: one solve per step, the adding
+    equations' V = P W P."""
+    a_up = sig_up / mu
+    a_dn = a_up[opp]
     t0 = t * 2.0 ** (-n_doublings)
     inv = t0 / (mu[:, None] * mu[None, :])
+    R0 = K["R"] * inv * phi(t0 * (a_up[:, None] + a_dn[None, :]))
+    T0 = K["T"] * jnp.exp(-t0 * a_dn)[:, None] * inv * phi(t0 * (a_dn[None, :] - a_dn[:, None]))
+    mirror = lambda X: X[..., opp, :][..., :, opp]  # noqa: E731
 
-    def r(ao, ai):  # reflection start: in along ai, out along ao
-        return inv * phi(t0 * (ao[:, None] + ai[None, :]))
+    def step(RT, level):
+        R, T = RT
+        e = jnp.exp(-(t0 * 2.0**level) * a_dn)
+        Ts, es = mirror(T), e[opp]
+        W = resolvent(R, mirror(R), c, n)  # (I - R C Rs C)^-1 R
+        R2 = R + left(es, Ts, right(W, e, T, c, n), c, n)
+        T2 = (e[:, None] * T + T * e[None, :] + cmul(T, T, c, n)
+              + left(e, T, right(cmul(mirror(W), R, c, n), e, T, c, n), c, n))
+        return (R2, T2), None
 
-    def tr(ao, ai):
-        return jnp.exp(-t0 * ao)[:, None] * inv * phi(t0 * (ai[None, :] - ao[:, None]))
-
-    op = Op(K["R"] * r(a_up, a_dn), K["T"] * tr(a_dn, a_dn), K["Rs"] * r(a_dn, a_up), K["Ts"] * tr(a_up, a_up),
-            jnp.exp(-t0 * a_dn), jnp.exp(-t0 * a_up))
-
-    def step(op, level):
-        op = op._replace(e=jnp.exp(-(t0 * 2.0**level) * a_dn), es=jnp.exp(-(t0 * 2.0**level) * a_up))
-        return add(op, op, c, n), None
-
-    op, _ = jax.lax.scan(step, op, jnp.arange(n_doublings, dtype=mu.dtype))
-    return op._replace(e=jnp.exp(-t * a_dn), es=jnp.exp(-t * a_up))
+    (R, T), _ = jax.lax.scan(step, (R0, T0), jnp.arange(n_doublings, dtype=mu.dtype))
+    return Op(R, T, mirror(R), mirror(T), jnp.exp(-t * a_dn), jnp.exp(-t * a_up))
 
 
-def _ms(media, thickness, Rb, W, mu, az, c, n, n_doublings, rotations, n_phi):
-    """Multiply scattered reflection (B, N, N) of the stack over the base (kernel ``Rb``
-    (B, N, N)) under an optional interface (weights ``W`` per direction, or None) on the grid."""
-    stack, ss, up, dn = None, 0.0, jnp.ones_like(mu), jnp.ones_like(mu)
-    opposite = _opposite(mu.shape[0] // n_phi, n_phi)
-    for k in range(thickness.shape[0]):
-        m = med.Params(**{f: getattr(media, f)[k] for f in med.FIELDS})
-        m = m.replace(alpha=jnp.sqrt(jnp.sqrt(m.alpha**4 + ALPHA_MIN**4)))
-        K, sig = _kernels(m, mu, az, c, rotations, n_phi)
-        sig_dn = sig[opposite]  # sigma is even: down at (mu, phi) = up at (mu, phi + pi)
-        op = _slab(K, sig, sig_dn, thickness[k], mu, c, n, n_doublings)
-        x = (sig / mu)[:, None] + (sig_dn / mu)[None, :]
-        single = -jnp.expm1(-thickness[k] * x) / (x * mu[:, None] * mu[None, :])
-        ss = ss + (up[:, None] * dn[None, :]) * K["R"] * single
-        up, dn = up * op.e_up, dn * op.e
+def _oriented(K, ext, t, mu, c, n, n_doublings, opp):
+    """The oriented slab's Op and its single-scattering reflection (from above, over nothing)."""
+    op = _slab(K, ext, t, mu, c, n, n_doublings, opp)
+    x = (ext / mu)[:, None] + (ext[opp] / mu)[None, :]
+    return op, K["R"] * (-jnp.expm1(-t * x) / (x * mu[:, None] * mu[None, :]))
+
+
+def _mixture(K, ext, t, mu_x, c_x, n_doublings, n_phi):
+    """The azimuth mixture's slab in modes (:func:`_to_modes`; up-down symmetric: R = Rs) and
+    its single-scattering reflection; ``K`` the mixture's rotation-averaged kernels (kappa)."""
+    SR, ST = _to_modes(K["R"]), _to_modes(K["T"])
+    op = doubled_slab(SR, ST, ext, t, mu_x, c_x, mu_x.shape[0], n_doublings)
+    a = ext / mu_x
+    x = a[:, None] + a[None, :]
+    return op, SR * (-jnp.expm1(-t * x) / (x * mu_x[:, None] * mu_x[None, :]))
+
+
+def _ms(layers, Rb, W, e_of, c, n):
+    """Multiply scattered reflection of a stack over a base (kernel ``Rb``) under an optional
+    interface (weights ``W`` per direction, or None): ``layers`` a list of (Op, single
+    scattering); ``e_of(op)`` the direct beams (up, down) of an Op."""
+    stack, ss = None, 0.0
+    up = dn = jnp.ones_like(c)
+    for op, single in layers:
+        ss = ss + (up[:, None] * dn[None, :]) * single
+        e_up, e_dn = e_of(op)
+        up, dn = up * e_up, dn * e_dn
         stack = op if stack is None else add(stack, op, c, n)
     ss = ss + up[:, None] * dn[None, :] * Rb
     Wb = resolvent(Rb, stack.Rs, c, n)
@@ -155,18 +206,39 @@ def _opposite(n_mu, n_phi):
 def correction(media, thickness, base_grid, W_mu, dtype, n_mu, n_phi, n_doublings=16):
     """Oriented minus mixture multiply scattered reflection (B, N, N) on the coarse grid and
     the grid's Gauss cosines. ``base_grid(mu, az)``: the base's kernel (B, N, N) between the
-    grid's directions; ``W_mu``: the interface's weights per Gauss cosine (or None)."""
+    grid's directions; ``W_mu``: the interface's weights per Gauss cosine (or None).
+
+    The mixture is the oriented medium averaged over rotations by the grid's azimuth steps: a
+    rotation permutes the grid, so its kernels are the oriented ones permuted and averaged
+    (:func:`rotation_average`; the discretisation errors of the two cancel in the difference),
+    and being rotation invariant it is solved per azimuthal mode (n_phi/2 + 1 blocks of
+    n_mu x n_mu instead of one dense operator of n_mu n_phi directions)."""
     mu, az, c, x = _grid(n_mu, n_phi, dtype)
     n = mu.shape[0]
+    opp = _opposite(n_mu, n_phi)
+    mu_x = jnp.asarray(x, dtype)
+    c_x = c.reshape(n_mu, n_phi)[:, 0]
     W = None if W_mu is None else jnp.repeat(W_mu, n_phi) / n_phi
-    # the mixture's rotations are the grid's own azimuth steps: a rotation permutes the grid, so the
-    # mixture's grid kernel is exactly the average of the oriented one and their discretisation
-    # errors cancel in the difference
-    rots = np.arange(n_phi) * (2.0 * np.pi / n_phi)
+    oriented, mixture = [], []
+    for k in range(thickness.shape[0]):
+        m = med.Params(**{f: getattr(media, f)[k] for f in med.FIELDS})
+        m = m.replace(alpha=jnp.sqrt(jnp.sqrt(m.alpha**4 + ALPHA_MIN**4)))
+        K, ext, sig_s = _raw_kernels(m, mu, az)
+        ext_x = jnp.mean(ext.reshape(n_mu, n_phi), axis=1)
+        sig_s_x = jnp.broadcast_to(jnp.mean(sig_s.reshape(-1, n_mu, n_phi), axis=2)[..., None],
+                                   sig_s.shape[:1] + (n_mu, n_phi)).reshape(sig_s.shape)
+        Km = {b: _expand(rotation_average(X, n_mu, n_phi), n_phi) for b, X in K.items()}
+        Ko = _balance(K, sig_s, c / mu, n_mu, n_phi)
+        Km = _balance(Km, sig_s_x, c / mu, n_mu, n_phi)
+        Km = {b: rotation_average(Km[b], n_mu, n_phi) for b in ("R", "T")}  # up-down symmetric: Rs = R, Ts = T
+        oriented.append(_oriented(Ko, ext, thickness[k], mu, c, n, n_doublings, opp))
+        mixture.append(_mixture(Km, ext_x, thickness[k], mu_x, c_x, n_doublings, n_phi))
     Rb = base_grid(mu, az)
-    oriented = _ms(media, thickness, Rb, W, mu, az, c, n, n_doublings, (0.0,), n_phi)
-    mixture = _ms(media, thickness, Rb, W, mu, az, c, n, n_doublings, tuple(rots), n_phi)
-    return oriented - mixture, x
+    Rb_x = _to_modes(rotation_average(Rb, n_mu, n_phi))
+    W_x = None if W_mu is None else W_mu / n_phi
+    R_or = _ms(oriented, Rb, W, lambda op: (op.e_up, op.e), c, n)
+    R_mix = _ms(mixture, Rb_x, W_x, lambda op: (op.e, op.e), c_x, n_mu)
+    return R_or - _expand(_from_modes(R_mix, n_phi), n_phi), x
 
 
 def _trig_weights(phi_q, n_phi):
@@ -186,12 +258,8 @@ def evaluate(C, x, mu_i, phi_i, mu_o, phi_o, lagrange, averaged: bool, n_phi: in
     C4 = C.reshape(B, n_mu, n_phi, n_mu, n_phi)  # [b, mu_o, phi_o, mu_i, phi_i]
     Lo, Li = lagrange(mu_o, x), lagrange(mu_i, x)
     if averaged:
-        # rotation average: C(mu_o, mu_i, dphi_k) = mean_l C[mu_o, l + k, mu_i, l]
-        k = np.arange(n_phi)
-        Cd = jnp.mean(jnp.stack([jnp.take(C4[..., l], (l + k) % n_phi, axis=2) for l in range(n_phi)]),
-                      axis=0)  # (B, mu_o, k, mu_i)
         Wd = _trig_weights(phi_o - phi_i, n_phi)
-        return jnp.einsum("qa,bakc,qk,qc->qb", Lo, Cd, Wd, Li)
+        return jnp.einsum("qa,back,qk,qc->qb", Lo, rotation_average(C, n_mu, n_phi), Wd, Li)
     Wo, Wi = _trig_weights(phi_o, n_phi), _trig_weights(phi_i, n_phi)
     return jnp.einsum("qa,qk,bakcl,qc,ql->qb", Lo, Wo, C4, Li, Wi)
 

@@ -59,3 +59,41 @@ def test_vmapped_starts_agree_with_single_solves():
         single = levenberg_marquardt(rosenbrock, starts[k], (1.0, 10.0))
         np.testing.assert_allclose(np.asarray(batched[0][k]), np.asarray(single[0]), atol=1e-12)
         assert bool(batched[3][k]) and int(batched[2][k]) == int(single[2])
+
+
+def _exponential(z, d):
+    t, y = d
+    return z[0] * jnp.exp(-z[1] * t) - y
+
+
+def test_loss_tol_stops_within_the_tolerance_of_the_optimum():
+    """loss_tol: the fit stops once the Gauss-Newton decrement (the loss an undamped step would still
+    remove) is below the tolerance; the loss is then within about that of the tight optimum, in
+    fewer iterations. Off (None), the step criterion alone decides, as before."""
+    t = jnp.linspace(0.0, 4.0, 30)
+    rng = np.random.default_rng(3)
+    y = 2.0 * jnp.exp(-0.7 * t) + 0.01 * jnp.asarray(rng.standard_normal(30))
+    d = (t, y / 0.01)  # whitened: residuals in units of the noise
+    fn = lambda z, d: _exponential(z, (d[0], d[1] * 0.01)) / 0.01  # noqa: E731
+    z0 = jnp.array([0.5, 3.0])
+    zt, lt, st, okt = levenberg_marquardt(fn, z0, d, rtol=1e-12, atol=1e-14)
+    for tol in (0.5, 0.005):
+        z, loss, steps, ok = levenberg_marquardt(fn, z0, d, rtol=1e-12, atol=1e-14, loss_tol=tol)
+        assert bool(ok) and int(steps) < int(st)
+        # the decrement bounds the remaining loss of the quadratic model; allow its curvature a factor 2
+        assert 0.0 <= float(loss) - float(lt) <= 2.0 * tol
+    # a tolerance no step can beat: stops at the first iteration, converged
+    _, _, steps, ok = levenberg_marquardt(fn, z0, d, loss_tol=1e12)
+    assert bool(ok) and int(steps) == 1
+
+
+def test_fit_checks_loss_tol():
+    from appearance_jax.fit import fit
+    from appearance_jax.fit.tables import Table
+
+    tab = Table(theta_i=np.zeros(1), phi_i=np.zeros(1), theta_o=np.zeros(1), phi_o=np.zeros(1),
+                values=np.ones((1, 3)), mask=np.ones((1, 3), bool))
+    with pytest.raises(ValueError, match="loss_tol = -1"):
+        fit("lambert", tab, loss_tol=-1)
+    with pytest.raises(ValueError, match="only solver='lm'"):
+        fit("lambert", tab, loss_tol=0.1, solver="gn")

@@ -4,8 +4,9 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
 1/2 |r(z)|^2 for a residual vector r of a handful of unconstrained parameters z, as one
 ``lax.while_loop`` (jittable, vmappable over starts or tables):
 
-- Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter), computed again
-  only after an accepted step;
+- Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter, the residual
+  its primal output), computed at the top of an iteration that follows an accepted step (one
+  trace of it in the program);
 - step: (JᵀJ + λ d I) δ = -Jᵀr, solved by Cholesky, with d the mean of diag(JᵀJ) (isotropic
   damping, as Levenberg's; Marquardt's per-parameter scaling, Moré 1978, crawled for hundreds of
   steps when a parameter sat at a bound of its transform, where its Jacobian column vanishes);
@@ -17,7 +18,8 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
 - convergence (the Cauchy criterion of optimistix' least-squares solvers): a step with
   max_i |δ_i| / (atol + rtol |z_i|) <= 1 and |Δloss| <= atol + rtol loss (accepted or, at an
   optimum, rejected by rounding), or a residual
-  orthogonal to every Jacobian column to rounding (cosine <= 100 eps, MINPACK's gtol test).
+  orthogonal to every Jacobian column to rounding (cosine <= 100 eps, MINPACK's gtol test),
+  or (``loss_tol``, off by default) a Gauss-Newton decrement below a loss tolerance.
   ``max_steps`` counts iterations (accepted or not); a damping above 1e16 (no step decreases
   the loss) stops the loop unconverged.
 
@@ -43,19 +45,23 @@ LAMBDA_MAX = 1e16
 
 
 def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10, max_steps: int = 400,
-                        progress=None):
+                        loss_tol: float | None = None, progress=None):
     """Minimise 1/2 |fn(z, data)|^2 from ``z0`` (p,). Returns ``(z, loss, steps, converged)``
-    (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``progress``: a
+    (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``loss_tol``:
+    also converged when the Gauss-Newton decrement 1/2 gᵀ(JᵀJ)⁻¹g at the current point (the
+    loss the undamped step would remove) is at most this (None: off). ``progress``: a
     host function ``(step, loss)`` called after every iteration (a host callback: such a
     program is not kept in JAX's persistent compilation cache)."""
     z0 = jnp.asarray(z0)
     dt = z0.dtype
-    jac = jax.jacfwd(fn)
+    # J and r in one forward pass (the residual is the JVP's primal output)
+    jac = jax.jacfwd(lambda z, d: (fn(z, d), fn(z, d)), has_aux=True)
 
     def lin(z):
-        return fn(z, data), jac(z, data)
+        J, r = jac(z, data)
+        return r, J
 
-    r0, J0 = lin(z0)
+    r0 = fn(z0, data)
     loss0 = 0.5 * jnp.sum(r0 * r0)
     lam0 = jnp.asarray(LAMBDA0, dt)
     eye = jnp.eye(z0.shape[0], dtype=dt)
@@ -64,7 +70,10 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         return (~s["done"]) & (s["step"] < max_steps)
 
     def body(s):
-        z, r, J, loss, lam, nu = s["z"], s["r"], s["J"], s["loss"], s["lam"], s["nu"]
+        z, loss, lam, nu = s["z"], s["loss"], s["lam"], s["nu"]
+        # the Jacobian at the current point, computed only after a move: one trace of the model's
+        # forward-mode derivative in the program (compile time), none after the last step
+        r, J = jax.lax.cond(s["fresh"], lambda: lin(z), lambda: (s["r"], s["J"]))
         g = J.T @ r
         H = J.T @ J
         # isotropic damping lam * mean(diag H) * I: a parameter pinned at a bound (its Jacobian column
@@ -92,17 +101,23 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         # not: at an optimum rounding rejects such steps (away from one a short enough step always
         # decreases the loss, and a NaN trial point fails small_change)
         converged = (jnp.isfinite(loss_new) & small_step & small_change) | flat
-        z2, r2, J2 = jax.lax.cond(ok, lambda: (z_new,) + lin(z_new), lambda: (z, r, J))
+        if loss_tol is not None:
+            # JᵀJ regularised at the dtype's rounding: an exactly flat direction (zero column) has g = 0
+            Hr = H + (10.0 * jnp.finfo(dt).eps * d) * eye
+            dec = 0.5 * jnp.dot(g, jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(Hr, lower=True), g))
+            converged = converged | (jnp.isfinite(dec) & (dec <= loss_tol))
+        z2 = jnp.where(ok, z_new, z)
         lam2 = jnp.where(ok, lam * jnp.maximum(1.0 / 3.0, 1.0 - (2.0 * rho - 1.0) ** 3), lam * nu)
         nu2 = jnp.where(ok, 2.0, 2.0 * nu)
         stuck = lam2 > LAMBDA_MAX
         if progress is not None:
             jax.debug.callback(progress, s["step"] + 1, jnp.where(ok, loss_new, loss))
-        return dict(z=z2, r=r2, J=J2, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
+        return dict(z=z2, r=r, J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
                     step=s["step"] + 1, done=converged | stuck, converged=converged)
 
-    s0 = dict(z=z0, r=r0, J=J0, loss=loss0, lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0),
-              done=~jnp.isfinite(loss0), converged=jnp.asarray(False))
+    s0 = dict(z=z0, r=r0, J=jnp.zeros((r0.shape[0], z0.shape[0]), dt), fresh=jnp.asarray(True), loss=loss0,
+              lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0), done=~jnp.isfinite(loss0),
+              converged=jnp.asarray(False))
     s = jax.lax.while_loop(cond, body, s0)
     return s["z"], s["loss"], s["step"], s["converged"]
 

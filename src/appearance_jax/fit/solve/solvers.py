@@ -100,12 +100,14 @@ def _make_solver(name, rtol, atol, verbose, n_valid=1):
     raise ValueError(f"solver = {name!r}: must be one of {', '.join(SOLVERS)}")
 
 
-def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0):
+def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0,
+            loss_tol=None):
     """One solve from z0 (traceable: vmap it over starts or data). Returns (z, loss, steps, ok)."""
     fn = problem.residuals_z
     if solver == "lm":
         n_valid = int(np.sum(np.asarray(problem.data["weight"]) > 0))
         z, loss, steps, ok = levenberg_marquardt(fn, z0, data, rtol=rtol, atol=atol, max_steps=max_steps,
+                                                 loss_tol=loss_tol,
                                                  progress=_progress_host(verbose, n_valid) if verbose else None)
         return z, loss, steps, ok & jnp.all(jnp.isfinite(z))
     if solver == "jaxopt_lm":
@@ -134,7 +136,8 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
 def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights=None,
         max_theta_deg: float | None = 85.0, use_sigma: bool = True, solver: str = "lm", rtol: float = 1e-8,
         atol: float = 1e-10, max_steps: int = 400, n_starts: int = 1, seed: int = 0, key=None,
-        model_kwargs=None, verbose: int = 0, bootstrap: int = 0, bootstrap_seed: int = 0) -> FitResult:
+        model_kwargs=None, verbose: int = 0, bootstrap: int = 0, bootstrap_seed: int = 0,
+        loss_tol: float | None = None) -> FitResult:
     """Fit ``model`` (a registered name or Model) to ``table``.
 
     Args:
@@ -147,6 +150,12 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         max_theta_deg: mask samples with theta_i or theta_o above this (grazing; None keeps all).
         use_sigma: normalise residuals by the table's sigma when it has one (absolute covariance).
         solver: one of ``SOLVERS``; rtol/atol/max_steps: its stopping rule.
+        loss_tol: ``solver="lm"`` only: also stop when the Gauss-Newton step from the current
+            point would lower the loss 1/2 sum r^2 by less than this (the fit is as close to the
+            data as it gets). With absolute sigmas (whitened residuals) that is a chi^2 within
+            2 loss_tol of its minimum: 0.005 puts every parameter within ~0.1 sigma of the
+            optimum, and ends fits whose poorly constrained directions would keep the step
+            criterion (rtol, atol on the parameters) from ever holding. None: off.
         n_starts: > 1 adds n_starts - 1 random starts (``seed``) and keeps the best.
         key: PRNG key for stochastic models (common random numbers).
         verbose: print step and loss every ``verbose`` steps (0: silent).
@@ -164,6 +173,11 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     compile_cache.ensure()
     if n_starts < 1:
         raise ValueError(f"n_starts = {n_starts} must be >= 1")
+    if loss_tol is not None:
+        if solver != "lm":
+            raise ValueError(f"loss_tol = {loss_tol!r}: only solver='lm' has this stopping rule (solver = {solver!r})")
+        if not (isinstance(loss_tol, (int, float, np.floating)) and np.isfinite(loss_tol) and loss_tol >= 0):
+            raise ValueError(f"loss_tol = {loss_tol!r} must be a finite number >= 0 (or None)")
     if bootstrap != 0:
         unc.bootstrap_weights(np.zeros(1, int), np.ones(1, bool), bootstrap)  # checks the count eagerly
     if not isinstance(bootstrap_seed, (int, np.integer)) or isinstance(bootstrap_seed, bool):
@@ -188,13 +202,13 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         # program 2-3x slower to compile (every branch becomes a select over the batch), and
         # on a CPU batching the starts saves little
         return jax.lax.map(lambda z: solve_z(problem, z, data, solver=solver, rtol=rtol, atol=atol,
-                                             max_steps=max_steps, verbose=verbose), z0s)
+                                             max_steps=max_steps, verbose=verbose, loss_tol=loss_tol), z0s)
 
     # the compiled solve is kept for later fits of the same problem and shapes (:mod:`~.reuse`)
     pkey = reuse.problem_key(problem)
     n_valid = int((np.asarray(problem.data["weight"]) > 0).sum()) if verbose else None  # printed loss scale
     # solve_z itself too: a replaced solver function (a test's monkeypatch) must not get the old program
-    skey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, verbose, n_valid)
+    skey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol)
     t0 = time.perf_counter()
     compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data).compile(),
                             z0, problem.data)
