@@ -97,3 +97,14 @@ def test_fit_checks_loss_tol():
         fit("lambert", tab, loss_tol=-1)
     with pytest.raises(ValueError, match="only solver='lm'"):
         fit("lambert", tab, loss_tol=0.1, solver="gn")
+
+
+
+def test_loss_tol_is_safe_in_a_curved_valley():
+    """The decrement test does not stop a crawl along a curved valley early (Rosenbrock, b = 1000:
+    damped steps there each gain little, which a test on the step's gain would take for
+    convergence): with zero residual at the optimum the decrement is the whole loss."""
+    with jax.enable_x64(True):
+        z, loss, steps, ok = levenberg_marquardt(rosenbrock, jnp.array([-1.2, 1.0]), (1.0, 1000.0), loss_tol=0.025,
+                                                 max_steps=400)
+        assert bool(ok) and float(loss) <= 0.025 + 1e-12

@@ -102,7 +102,11 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         # decreases the loss, and a NaN trial point fails small_change)
         converged = (jnp.isfinite(loss_new) & small_step & small_change) | flat
         if loss_tol is not None:
-            # JᵀJ regularised at the dtype's rounding: an exactly flat direction (zero column) has g = 0
+            # JᵀJ regularised at the dtype's rounding: an exactly flat direction (zero column) has g = 0.
+            # Conservative near a bound of a parameter's transform: there its column vanishes but the
+            # residual's projection on it does not, so the decrement stays up and the fit goes on. A
+            # test on a step's gain instead (MINPACK's ftol) would end such crawls sooner, but it also
+            # stops Rosenbrock's curved valley (b = 1000) at a loss of 2: not used
             Hr = H + (10.0 * jnp.finfo(dt).eps * d) * eye
             dec = 0.5 * jnp.dot(g, jax.scipy.linalg.cho_solve(jax.scipy.linalg.cho_factor(Hr, lower=True), g))
             converged = converged | (jnp.isfinite(dec) & (dec <= loss_tol))
