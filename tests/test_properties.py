@@ -97,9 +97,11 @@ GRID: dict[str, list[Case]] = {
     # tests/layered/test_random_walk.py
     "cosmetics": [Case("dewy1", dict(preset="dewy1"))],
     # deterministic solver: tilted platelets, oriented, under a dielectric over an RGB base
+    # 12 Gauss cosines x 8 modes: every code path of the default 24 x 24 at a third of the cost (the
+    # properties hold at any quadrature; tests/bsdf/test_cosmetics_ordinates.py checks the default's accuracy)
     "cosmetics_ordinates": [Case("tilted_interface_base", dict(c_d=0.7, alpha=0.3, theta=0.3, thickness=2.0,
                                                                base_reflectance=(0.2, 0.5, 0.9), eta=1.4,
-                                                               azimuth="fixed"))],
+                                                               azimuth="fixed", n_nodes=12, n_modes=8))],
     # Sadeghi's cloth (BRDF form, not reciprocal: cos theta_i(t) / N.w_i; tests/bsdf/test_cloth.py checks
     # f_s, M and P). T = 4 tangent samples keep it cheap (presets: SLOW_GRID); the default energy gate
     # incident_cosine="patch" keeps the albedo <= 1 at grazing incidence (the thesis' formula does not)

@@ -277,7 +277,7 @@ def test_tilt_grid_algebra_modes_and_mirror_doubling():
         K = ot._balance(K, sig_s, c / mu, n_mu, n_phi)
         opp = ot._opposite(n_mu, n_phi)
         np.testing.assert_allclose(np.asarray(K["Rs"]), np.asarray(K["R"][:, opp][:, :, opp]), rtol=1e-10)
-        t, levels, n = 3.0, 10, n_mu * n_phi
+        t, levels, n = 3.0, 4, n_mu * n_phi
         fast = ot._slab(K, ext, t, mu, c, n, levels, opp)
         a_up, a_dn = ext / mu, ext[opp] / mu
         t0 = t * 2.0 ** (-levels)

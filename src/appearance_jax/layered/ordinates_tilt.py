@@ -7,10 +7,12 @@ order in the platelets' anisotropy: a few percent at theta_p = 52 deg (Padrón T
 The difference is smooth, so a coarse solve resolves it: directions on a full (mu, phi) grid
 (``n_mu`` Gauss cosines x ``n_phi`` uniform azimuths per hemisphere, dense operators of
 n_mu n_phi directions), the same starting layer, doubling and adding (:mod:`.kernel_ops`, the
-general, up-down asymmetric adding equations: an oriented tilted slab seen from below is its
-mirror image), once with the oriented kernels and once with the mixture's on the same grid, so
-that the discretisation errors of the two cancel in the difference. Single scattering is left
-out of both (:mod:`.ordinates` evaluates it exactly).
+up-down asymmetric adding equations: an oriented tilted slab seen from below is its image
+rotated by pi, which also lets its doubling get by with one solve per step), once with the
+oriented kernels and once with the mixture's on the same grid, so that the discretisation errors
+of the two cancel in the difference. The mixture's kernels are the oriented ones averaged over
+the grid's rotations (permutations of the grid), and being rotation invariant it is solved per
+azimuthal mode. Single scattering is left out of both (:mod:`.ordinates` evaluates it exactly).
 
 The correction is returned on the coarse grid and evaluated at query directions by Lagrange
 interpolation in mu and trigonometric interpolation in the azimuths (``azimuth="fixed"``), or
