@@ -4,9 +4,8 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
 1/2 |r(z)|^2 for a residual vector r of a handful of unconstrained parameters z, as one
 ``lax.while_loop`` (jittable, vmappable over starts or tables):
 
-- Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter, the residual
-  its primal output), computed at the top of an iteration that follows an accepted step (one
-  trace of it in the program);
+- Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter), computed at the
+  top of an iteration that follows an accepted step (one trace of it in the program);
 - step: (JᵀJ + λ d I) δ = -Jᵀr, solved by Cholesky, with d the mean of diag(JᵀJ) (isotropic
   damping, as Levenberg's; Marquardt's per-parameter scaling, Moré 1978, crawled for hundreds of
   steps when a parameter sat at a bound of its transform, where its Jacobian column vanishes);
@@ -54,12 +53,13 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     program is not kept in JAX's persistent compilation cache)."""
     z0 = jnp.asarray(z0)
     dt = z0.dtype
-    # J and r in one forward pass (the residual is the JVP's primal output)
-    jac = jax.jacfwd(lambda z, d: (fn(z, d), fn(z, d)), has_aux=True)
+    jac = jax.jacfwd(fn)
 
     def lin(z):
-        J, r = jac(z, data)
-        return r, J
+        # r from a plain evaluation, not as the JVP's primal output (jacfwd(has_aux)): a Monte Carlo
+        # model's estimator may differ under differentiation (the cosmetics walk's CRN fit then stopped
+        # converging), and r must match the loss of the trial evaluation
+        return fn(z, data), jac(z, data)
 
     r0 = fn(z0, data)
     loss0 = 0.5 * jnp.sum(r0 * r0)
