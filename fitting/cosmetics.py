@@ -49,7 +49,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-from cosmetics_data import LAYOUTS, NOISE, perturbed_start, quick_layout, synthetic_table  # noqa: E402
+from cosmetics_data import (LAYOUTS, NOISE, perturbed_start, powell_fit, quick_layout,  # noqa: E402
+                            synthetic_table, write_records)
 
 CASES = ("dewy1", "dewy2", "matte1", "matte2")
 FREE = ("c_d", "albedo_d", "albedo_p", "w_g", "g1", "g2", "alpha", "theta")
@@ -211,31 +212,11 @@ def _powell(prob, x0, n_valid, maxfev, progress):
     """SciPy's Powell on the same (deterministic) chi-square, bounded to the parameters' ranges."""
     import jax
     import jax.numpy as jnp
-    from scipy.optimize import minimize
-
-    from appearance_jax.core.params import param_specs
 
     loss = jax.jit(lambda x, d: jnp.sum(prob.residuals_x(x, d) ** 2))
-    specs = param_specs(prob.model.Params)
-    bounds = []
-    for f in prob.space.fields:
-        s = specs[f.name]
-        eps = 1e-4 * (s.hi - s.lo)
-        bounds += [(s.lo + eps, s.hi - eps)] * f.size
-    count = [0]
-
-    def objective(x):
-        count[0] += 1
-        return float(loss(jnp.asarray(x, jnp.result_type(float)), prob.data)) / n_valid
-
-    t0 = time.perf_counter()
-    objective(x0)
-    t_c = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    opt = minimize(objective, x0, method="Powell", bounds=bounds, options=dict(xtol=1e-3, ftol=1e-5, maxfev=maxfev))
-    pw = dict(time=time.perf_counter() - t0, compile=t_c, evals=count[0], loss=float(opt.fun), x=np.asarray(opt.x))
+    pw = powell_fit(loss, prob, x0, n_valid, maxfev, warm=True)
     progress(f"  Powell: chi2/N {pw['loss']:.4g} in {pw['evals']} evaluations, {pw['time']:.1f} s "
-             f"(+ {t_c:.1f} s compile)")
+             f"(+ {pw['compile']:.1f} s compile)")
     return pw
 
 
@@ -289,15 +270,7 @@ def cross_layout(idents):
 
 
 def write_results(rows, summaries, idents, out):
-    os.makedirs(out, exist_ok=True)
-    with open(os.path.join(out, "results.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    with open(os.path.join(out, "summary.json"), "w") as fh:
-        json.dump(summaries, fh, indent=1)
-    with open(os.path.join(out, "identifiability.json"), "w") as fh:
-        json.dump(idents, fh, indent=1)
+    write_records(out, rows, summaries, identifiability=idents)
     lines = ["| case | layout | parameter | truth | start | LM fit ± 1σ | z | σ (bounds held) | σ at truth | "
              "identified | Powell | flag |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -359,11 +332,9 @@ def main(argv=None):
     ap.add_argument("--cache-dir", default=None, help="JAX persistent compilation cache")
     args = ap.parse_args(argv)
     if args.report_only:
-        import csv as _csv
-
         with open(os.path.join(args.out, "results.csv")) as fh:
             rows = [{k: (v == "True" if v in ("True", "False") else float(v) if _num(v) else v) for k, v in r.items()}
-                    for r in _csv.DictReader(fh)]
+                    for r in csv.DictReader(fh)]
         with open(os.path.join(args.out, "summary.json")) as fh:
             sums = json.load(fh)
         with open(os.path.join(args.out, "identifiability.json")) as fh:

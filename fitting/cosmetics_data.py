@@ -29,6 +29,8 @@ noise (numpy seed per layout) and sigma = sqrt((noise f)^2 + se^2) stated in the
 
 from __future__ import annotations
 
+import csv
+import json
 import os
 import time
 
@@ -168,6 +170,50 @@ def perturbed_start(model, truth, free, perturb=PERTURB):
             sign = -sign
         kw[name] = tuple(v) if v.size > 1 else float(v[0])
     return truth.replace(**kw)
+
+
+def powell_fit(loss, prob, x0, n_valid, maxfev, *, warm=False):
+    """SciPy's Powell on ``loss(x, data) / n_valid`` (x physical), each parameter bounded 1e-4 of
+    its range inside the range. ``warm``: one timed call first (the loss's compile, counted as an
+    evaluation). Returns dict(time, compile, evals, iterations, loss, x, message)."""
+    import jax.numpy as jnp
+    from scipy.optimize import minimize
+
+    from appearance_jax.core.params import param_specs
+
+    specs = param_specs(prob.model.Params)
+    bounds = []
+    for f in prob.space.fields:
+        s = specs[f.name]
+        eps = 1e-4 * (s.hi - s.lo)
+        bounds += [(s.lo + eps, s.hi - eps)] * f.size
+    count = [0]
+
+    def objective(x):
+        count[0] += 1
+        return float(loss(jnp.asarray(x, jnp.result_type(float)), prob.data)) / n_valid
+
+    t_c = 0.0
+    if warm:
+        t0 = time.perf_counter()
+        objective(x0)
+        t_c = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    opt = minimize(objective, x0, method="Powell", bounds=bounds, options=dict(xtol=1e-3, ftol=1e-5, maxfev=maxfev))
+    return dict(time=time.perf_counter() - t0, compile=t_c, evals=count[0], iterations=int(opt.nit),
+                loss=float(opt.fun), x=np.asarray(opt.x), message=str(opt.message))
+
+
+def write_records(out, rows, summaries, **extra):
+    """results.csv (one row per parameter), summary.json and one <name>.json per ``extra`` item."""
+    os.makedirs(out, exist_ok=True)
+    with open(os.path.join(out, "results.csv"), "w", newline="") as fh:
+        w = csv.DictWriter(fh, list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    for name, obj in (("summary", summaries),) + tuple(extra.items()):
+        with open(os.path.join(out, f"{name}.json"), "w") as fh:
+            json.dump(obj, fh, indent=1)
 
 
 def generate(argv=None):

@@ -20,15 +20,13 @@ default path (``--solver ordinates``) and the data: fitting/cosmetics.py, fittin
 
 from __future__ import annotations
 
-import csv
 import dataclasses
-import json
 import os
 import time
 
 import numpy as np
 
-from cosmetics_data import NOISE, perturbed_start, synthetic_table
+from cosmetics_data import NOISE, perturbed_start, powell_fit, synthetic_table, write_records
 
 FREE = ("c_d", "albedo_d", "albedo_p", "w_g", "g1", "g2", "alpha", "theta")
 ALWAYS_FIXED = ("thickness", "base_reflectance")
@@ -49,7 +47,6 @@ def run_case(name, *, free=FREE, samples=64, bounces=64, gen_samples=4096, gen_b
     import jax.numpy as jnp
 
     from appearance_jax.bsdf import cosmetics
-    from appearance_jax.core.params import param_specs
     from appearance_jax.fit import fit
     from appearance_jax.fit.solve import build_problem
     from appearance_jax.fit.solve.transforms import ParamSpace
@@ -137,25 +134,8 @@ def run_case(name, *, free=FREE, samples=64, bounces=64, gen_samples=4096, gen_b
 
     pw = None
     if powell:
-        from scipy.optimize import minimize
-
-        specs = param_specs(model.Params)
-        bounds = []
-        for f in sp.fields:
-            s = specs[f.name]
-            eps = 1e-4 * (s.hi - s.lo)
-            bounds += [(s.lo + eps, s.hi - eps)] * f.size
-        count = [0]
-
-        def objective(x):
-            count[0] += 1
-            return float(loss_fn(jnp.asarray(x, jnp.result_type(float)), prob.data)) / n_valid
-
-        t0 = time.perf_counter()
-        opt = minimize(objective, x0, method="Powell", bounds=bounds,
-                       options=dict(xtol=1e-3, ftol=1e-5, maxfev=powell_maxfev))
-        pw = dict(time=time.perf_counter() - t0, evals=count[0], compile=loss_compile, iterations=int(opt.nit), loss=float(opt.fun),
-                  x=np.asarray(opt.x), message=str(opt.message))
+        pw = powell_fit(loss_fn, prob, x0, n_valid, powell_maxfev)
+        pw["compile"] = loss_compile
         progress(f"  Powell: loss {pw['loss']:.4g} in {pw['evals']} evaluations ({pw['iterations']} sweeps), "
                  f"{pw['time']:.1f} s (+ {loss_compile:.1f} s compile of the loss); {pw['message']}")
 
@@ -196,13 +176,7 @@ def run_case(name, *, free=FREE, samples=64, bounces=64, gen_samples=4096, gen_b
 
 
 def write_results(rows, summaries, out):
-    os.makedirs(out, exist_ok=True)
-    with open(os.path.join(out, "results.csv"), "w", newline="") as fh:
-        w = csv.DictWriter(fh, list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
-    with open(os.path.join(out, "summary.json"), "w") as fh:
-        json.dump(summaries, fh, indent=1)
+    write_records(out, rows, summaries)
     lines = ["| case | parameter | truth | start | LM fit ± 1σ (CRN J) | z | σ (hi-sample J, ×χ²) | z | Powell | flag |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
