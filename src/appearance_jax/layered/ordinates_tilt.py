@@ -43,10 +43,12 @@ def _grid(n_mu, n_phi, dtype):
     return jnp.asarray(mu, dtype), jnp.asarray(az, dtype), jnp.asarray(c, dtype), x
 
 
-def direction(mu, az, up: bool) -> Vec3:
-    """Unit vector at polar cosine ``mu`` (> 0) and azimuth ``az``, travelling up or down."""
+def direction(mu, az, up) -> Vec3:
+    """Unit vector at polar cosine ``mu`` (> 0) and azimuth ``az``, travelling up (``up`` True
+    or +1) or down (False or -1; an array of signs broadcasts)."""
     s = jnp.sqrt(jnp.maximum(1.0 - mu * mu, 0.0))
-    return Vec3(s * jnp.cos(az), s * jnp.sin(az), mu if up else -mu)
+    sign = (1.0 if up else -1.0) if isinstance(up, bool) else up
+    return Vec3(s * jnp.cos(az), s * jnp.sin(az), sign * mu)
 
 
 def rotate_z(w: Vec3, g) -> Vec3:
@@ -59,12 +61,15 @@ def _raw_kernels(m, mu, az):
     """sigma_s f of the oriented medium between the grid's directions for the four in/out
     combinations (dict of (B, N, N) [out, in]), the extinction (N,) and sigma_s (B, N) per
     direction (even: up = down)."""
-    out = {}
-    for name, in_up, out_up in (("R", False, True), ("T", False, False), ("Rs", True, False), ("Ts", True, True)):
-        d_in = direction(mu[None, :], az[None, :], in_up)
-        wi = Vec3(-d_in.x, -d_in.y, -d_in.z)
-        wo = direction(mu[:, None], az[:, None], out_up)
-        out[name] = jnp.moveaxis(med.scattering_coefficient(m, wi, wo), -1, 0)
+    names = ("R", "T", "Rs", "Ts")
+    # one evaluation over a leading axis of the four combinations (compiled once, not four times)
+    in_up = np.array([-1.0, -1.0, 1.0, 1.0])[:, None, None]
+    out_up = np.array([1.0, -1.0, -1.0, 1.0])[:, None, None]
+    d_in = direction(mu[None, None, :], az[None, None, :], in_up)
+    wi = Vec3(-d_in.x, -d_in.y, -d_in.z)
+    wo = direction(mu[None, :, None], az[None, :, None], out_up)
+    S = jnp.moveaxis(med.scattering_coefficient(m, wi, wo), -1, 1)  # (4, B, N, N)
+    out = {name: S[j] for j, name in enumerate(names)}
     w = direction(mu, az, True)
     ext = med.extinction(m, w)
     sig_s = jnp.moveaxis(med.albedo(m, w) * ext[..., None], -1, 0)
@@ -230,8 +235,11 @@ def correction(media, thickness, base_grid, W_mu, dtype, n_mu, n_phi, n_doubling
         sig_s_x = jnp.broadcast_to(jnp.mean(sig_s.reshape(-1, n_mu, n_phi), axis=2)[..., None],
                                    sig_s.shape[:1] + (n_mu, n_phi)).reshape(sig_s.shape)
         Km = {b: _expand(rotation_average(X, n_mu, n_phi), n_phi) for b, X in K.items()}
-        Ko = _balance(K, sig_s, c / mu, n_mu, n_phi)
-        Km = _balance(Km, sig_s_x, c / mu, n_mu, n_phi)
+        # both balanced in one loop (stacked along the bands axis): one compiled loop, not two
+        B = sig_s.shape[0]
+        both = _balance({b: jnp.concatenate([K[b], Km[b]]) for b in K}, jnp.concatenate([sig_s, sig_s_x]),
+                        c / mu, n_mu, n_phi)
+        Ko, Km = ({b: X[:B] for b, X in both.items()}, {b: X[B:] for b, X in both.items()})
         Km = {b: rotation_average(Km[b], n_mu, n_phi) for b in ("R", "T")}  # up-down symmetric: Rs = R, Ts = T
         oriented.append(_oriented(Ko, ext, thickness[k], mu, c, n, n_doublings, opp))
         mixture.append(_mixture(Km, ext_x, thickness[k], mu_x, c_x, n_doublings, n_phi))
