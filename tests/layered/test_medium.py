@@ -36,15 +36,20 @@ def test_platelet_area_is_one_at_most_along_the_mean_normal():
     np.testing.assert_allclose(medium.platelet_area(M, sggx.mean_normal(M.theta)), 1.0, rtol=1e-12)
 
 
+@jax.jit
+def _phase_totals(wis, w, weight):
+    """The quadrature of the phase function over wo, per incident direction (one compiled program
+    for both seeds below instead of op-by-op dispatch)."""
+    def total(x, y, z):
+        wi = Vec3(*(jnp.full(w.z.shape, c) for c in (x, y, z)))
+        return jnp.sum(weight[:, None] * medium.phase(M, wi, w), axis=0)
+    return jax.vmap(total)(wis.x, wis.y, wis.z)
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_phase_function_is_normalised(seed):
     """Q-C1: the mixture (4.8) integrates to 1 over wo, for any incident direction."""
-    w, weight = sphere_rule(256, 512)
-    wis = directions(3, seed)
-    for j in range(3):
-        wi = Vec3(*(jnp.full(w.z.shape, getattr(wis, a)[j]) for a in "xyz"))
-        total = jnp.sum(weight[:, None] * medium.phase(M, wi, w), axis=0)
-        np.testing.assert_allclose(total, 1.0, atol=2e-3)
+    np.testing.assert_allclose(_phase_totals(directions(3, seed), *sphere_rule(256, 512)), 1.0, atol=2e-3)
 
 
 def test_medium_reciprocity():
@@ -77,14 +82,25 @@ def _collide_mc(m, wi, n, key):
 def test_collision_kernel_has_the_expectation_of_eqs_4_7_and_4_8():
     """E[weight h(wo)] over the event kernel == int Lambda(wi) f(wi -> wo) h(wo) dwo (spec M15)."""
     wi = (0.3, -0.4, math.sqrt(1 - 0.25))
-    w, weight = sphere_rule(256, 512)
-    wis = Vec3(*(jnp.full(w.z.shape, c) for c in wi))
     tests = [lambda v: jnp.ones_like(v.z), lambda v: v.z, lambda v: (v.x + 0.5) ** 2, lambda v: v.y * v.z]
-    ref = [np.asarray(jnp.sum(weight[:, None] * h(w)[:, None] * medium.scattering(M, wis, w), axis=0)) for h in tests]
+
+    # the quadratures and the samples each one compiled program (not op by op)
+    @jax.jit
+    def reference(w, weight):
+        wis = Vec3(*(jnp.full(w.z.shape, c) for c in wi))
+        s = medium.scattering(M, wis, w)
+        return [jnp.sum(weight[:, None] * h(w)[:, None] * s, axis=0) for h in tests]
+
     n = 2**18
-    wo, wgt = _collide_mc(M, wi, n, jax.random.key(7))
-    for h, r in zip(tests, ref):
-        x = np.asarray(wgt * h(wo)[:, None])
+
+    @jax.jit
+    def samples(key):
+        wo, wgt = _collide_mc(M, wi, n, key)
+        return [wgt * h(wo)[:, None] for h in tests]
+
+    ref = [np.asarray(r) for r in reference(*sphere_rule(256, 512))]
+    for x, r in zip(samples(jax.random.key(7)), ref):
+        x = np.asarray(x)
         mean, se = x.mean(0), x.std(0, ddof=1) / math.sqrt(n)
         assert np.all(np.abs(mean - r) < 4 * se + 1e-3 * np.abs(r)), (mean, r, se)
 
@@ -106,10 +122,9 @@ def test_collision_kernel_gradients_are_unbiased():
     # jitted: one program instead of the op-by-op gradient's many small ones
     quad = jax.jit(jax.grad(lambda x: jnp.sum(weight[:, None] * h(w)[:, None] * medium.scattering(make(x), wis, w))))(x0)
     n, n_keys = 2**16, 16
-    wi_n = Vec3(*(jnp.full((n,), c) for c in wi))
-
     @jax.jit
     def grad_est(key):
+        wi_n = Vec3(*(jnp.full((n,), c) for c in wi))  # built inside: not a 2^16-element constant of the program
         us = jax.random.uniform(key, (4, n))
 
         def est(x):
