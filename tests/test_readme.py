@@ -4,6 +4,7 @@ import pathlib
 import re
 
 import numpy as np
+import pytest
 
 README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
 
@@ -58,9 +59,17 @@ def test_thin_film_example_runs():
     assert chart.shape == (101, 18, 3) and np.all((chart >= 0) & (chart <= 1))
 
 
-def test_soap_bubble_example_runs():
+@pytest.fixture(scope="module")
+def bubble_ns():
+    """The namespace after the README's soap-bubble example, run once for the two tests below (the
+    flow example continues it)."""
     ns: dict = {}
     exec(compile(_block("soapfilm.render("), "README soap-bubble example", "exec"), ns)
+    return ns
+
+
+def test_soap_bubble_example_runs(bubble_ns):
+    ns = dict(bubble_ns)
     image, mask = np.asarray(ns["image"]), np.asarray(ns["mask"])
     assert image.shape == (64, 64, 3) and mask.shape == (64, 64) and np.all(np.isfinite(image))
     assert 0.7 < mask.mean() < 0.8  # the disc: pi / 4 of the square
@@ -111,10 +120,10 @@ def test_cloth_example_runs():
     assert not np.allclose(f, f90)  # the weave is anisotropic
 
 
-def test_soap_film_flow_example_runs():
-    """The bubble example, then the flow example that continues it (same namespace)."""
-    ns: dict = {}
-    exec(compile(_block("soapfilm.render("), "README bubble example", "exec"), ns)
+def test_soap_film_flow_example_runs(bubble_ns):
+    """The bubble example, then the flow example that continues it (a copy of the bubble's namespace:
+    the bubble test's names stay as the bubble example left them)."""
+    ns = dict(bubble_ns)
     exec(compile(_block("soapfilm.simulate("), "README flow example", "exec"), ns)
     frames = np.asarray(ns["sim"].frames)
     assert frames.shape == (5, 32, 64) and ns["sim"].stopped is None

@@ -168,7 +168,9 @@ def test_table_without_in_plane_samples_renders_the_model(in_plane_fit, tmp_path
 def test_merl_grid_in_plane_points_are_scattered(in_plane_fit, tmp_path):
     from appearance_jax.fit.tables.proxy import proxy_table
 
-    t = proxy_table("white-fabric", "merl", stride=10)
+    # stride 18: 250 MERL nodes, 102 of them in the plane, still scattered (the report's time is in
+    # drawing the raster, which does not shrink with the table; stride 10 only added nodes)
+    t = proxy_table("white-fabric", "merl", stride=18)
     paths = write_report(_refit(in_plane_fit, t), tmp_path, progress=None, plots=True)
     d = json.loads(open(paths["params"]).read())
     assert "scattered" in d["figures"]["maps"], d["figures"]
