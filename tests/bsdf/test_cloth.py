@@ -2,6 +2,7 @@
 convention (D-C4), reciprocity of f_s / M / P, energy bound, gradients, weave rotation, the
 one-cylinder limit, qualitative statements of the thesis, and the plot recipe."""
 
+import dataclasses
 import importlib.util
 import math
 import os
@@ -23,8 +24,20 @@ T = 16  # tangent samples in the default tests (D-C9 default 64 in the presets)
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
+K_PAD = 8  # control points per tangent curve in the tests (the most of any preset)
+
+
+def _pad(p):
+    """``p`` with its tangent curves padded to K_PAD control points (weave.pad: the last offset repeated
+    over zero-length segments). The tangent samples, and so every value of the model, are the
+    same (test_tangent_curve_sampling_with_jumps_and_padding); one shape for every weave lets the
+    tests share compiled programs (eval compiles one per shape and static options)."""
+    c = weave.pad(weave.Curve(p.offsets, p.lengths), K_PAD)
+    return p.replace(offsets=c.offsets, lengths=c.lengths)
+
+
 def _p(name, **kw):
-    return cloth.PRESETS[name].replace(n_samples=kw.pop("n_samples", T), **kw)
+    return _pad(cloth.PRESETS[name]).replace(n_samples=kw.pop("n_samples", T), **kw)
 
 
 def _plane(plane_deg, theta_i_deg, theta_o_deg):
@@ -37,9 +50,32 @@ def _plane(plane_deg, theta_i_deg, theta_o_deg):
     return wi, wo
 
 
+def _call(fn, p, wi, wo):
+    """``fn(p, wi, wo)`` (eval, radiance_response, pdf) as numpy, on padded chunks of testing.CHUNK
+    directions (testing.call_chunked): compilation dominates this file, and so every call on one
+    parameter configuration runs one compiled program, that of the albedo quadratures too,
+    whatever its number of directions."""
+    return testing.call_chunked(fn, p, wi, wo)
+
+
+# The weave functions and the energy tables outside eval, compiled: called eagerly each of their
+# operations compiles on its own (~100 small programs per test), as one program they compile once
+_masking, _reweighting, _single = (jax.jit(f) for f in (weave.masking, weave.reweighting, weave.single))
+_sample_curve = jax.jit(weave.sample_curve, static_argnums=2)
+_exit_tables_jit = jax.jit(cloth.energy.exit_tables)
+
+
+def _exit_tables(p):
+    """(C2, C1p, C1m) of cloth.energy.exit_tables for the families of ``p``, (J, N, bands) each."""
+    return _exit_tables_jit(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)
+
+
+_random_directions = jax.jit(testing.random_directions, static_argnums=(1, 2, 3))  # (as above: one program)
+
+
 def _random_pairs(key, n):
-    return (testing.random_directions(jax.random.key(key), n, "upper", min_cos=0.05),
-            testing.random_directions(jax.random.key(key + 1), n, "upper", min_cos=0.05))
+    return (_random_directions(jax.random.key(key), n, "upper", 0.05),
+            _random_directions(jax.random.key(key + 1), n, "upper", 0.05))
 
 
 # ----------------------------------------------------------------------------------- K1
@@ -64,17 +100,23 @@ def test_k1_tables_load():
 
 
 def test_tangent_curve_sampling_with_jumps_and_padding():
-    a = np.asarray(weave.sample_curve(jnp.array([-90.0, -55.0, 55.0, 90.0]), jnp.array([0.5, 0.0, 0.5]), 8))
+    a = np.asarray(_sample_curve(jnp.array([-90.0, -55.0, 55.0, 90.0]), jnp.array([0.5, 0.0, 0.5]), 8))
     np.testing.assert_allclose(a, [-85.625, -76.875, -68.125, -59.375, 59.375, 68.125, 76.875, 85.625])
     c = weave.pad(weave.plain(25.0), 5)
-    np.testing.assert_allclose(np.asarray(weave.sample_curve(c.offsets, c.lengths, 4)), [-18.75, -6.25, 6.25, 18.75])
+    np.testing.assert_allclose(np.asarray(_sample_curve(c.offsets, c.lengths, 4)), [-18.75, -6.25, 6.25, 18.75])
     # satin: three flat sections -> most samples at -32, 0, 32
-    s = np.asarray(weave.sample_curve(*weave.satin(), 100))
+    s = np.asarray(_sample_curve(*weave.satin(), 100))
     assert np.sum(s == -32) == np.sum(s == 32) >= 12 and np.sum(s == 0) >= 18
     # twill with over = 1 is the plain ramp
     tw, pl = weave.twill(25.0, over=1), weave.plain(25.0)
-    np.testing.assert_allclose(np.asarray(weave.sample_curve(*tw, 8)), np.asarray(weave.sample_curve(*pl, 8)))
+    np.testing.assert_allclose(np.asarray(_sample_curve(*tw, 8)), np.asarray(_sample_curve(*pl, 8)))
     assert weave.twill_coverage(2, 1) == pytest.approx((2 / 3, 1 / 3))
+    # the presets padded to K_PAD control points (what the tests below evaluate): the same samples
+    for name, p in cloth.PRESETS.items():
+        q = _p(name)
+        assert np.shape(q.offsets)[-1] == K_PAD
+        np.testing.assert_array_equal(np.asarray(_sample_curve(q.offsets, q.lengths, T)),
+                                      np.asarray(_sample_curve(p.offsets, p.lengths, T)), err_msg=name)
 
 
 # ----------------------------------------------------------------------------- D-C4
@@ -83,8 +125,8 @@ def test_tangent_curve_sampling_with_jumps_and_padding():
 def test_brdf_and_radiance_response_forms():
     p = _p("silk_crepe_de_chine")
     wi, wo = _random_pairs(10, 64)
-    f = np.asarray(cloth.eval(p, wi, wo))
-    r = np.asarray(cloth.radiance_response(p, wi, wo))
+    f = _call(cloth.eval, p, wi, wo)
+    r = _call(cloth.radiance_response, p, wi, wo)
     np.testing.assert_allclose(f * np.asarray(wi.z)[:, None], r, rtol=1e-12)
     assert r.max() > 0
 
@@ -107,7 +149,7 @@ def test_one_straight_family_reduces_to_one_cylinder():
     pm = p.replace(masking=True)
     in_, iv = np.asarray(wi.z), np.asarray(wi.x * v.x + wi.y * v.y)
     on, ov = np.asarray(wo.z), np.asarray(wo.x * v.x + wo.y * v.y)
-    M = np.asarray(weave.masking(in_, iv, on, ov, 20 * D))
+    M = np.asarray(_masking(in_, iv, on, ov, 20 * D))
     np.testing.assert_allclose(np.asarray(cloth.eval(pm, wi, wo)), want * M[:, None], rtol=1e-10)
 
 
@@ -118,32 +160,33 @@ def test_thread_masking_reweighting_reciprocal_model_not():
     k = jax.random.split(jax.random.key(20), 4)
     it, in_, iv, ot, on, ov = (jax.random.uniform(kk, (512,), minval=-1, maxval=1)
                                for kk in jax.random.split(k[0], 6))
-    M1, M2 = weave.masking(in_, iv, on, ov, 20 * D), weave.masking(on, ov, in_, iv, 20 * D)
-    P1, P2 = weave.reweighting(it, in_, ot, on, 20 * D), weave.reweighting(ot, on, it, in_, 20 * D)
+    M1, M2 = _masking(in_, iv, on, ov, 20 * D), _masking(on, ov, in_, iv, 20 * D)
+    P1, P2 = _reweighting(it, in_, ot, on, 20 * D), _reweighting(ot, on, it, in_, 20 * D)
     np.testing.assert_allclose(np.asarray(M1), np.asarray(M2), rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(np.asarray(P1), np.asarray(P2), rtol=1e-13, atol=1e-15)
     assert 0.05 < float(jnp.mean(M1 > 0)) < 0.95  # the test sees both masked and unmasked pairs
     p = _p("linen_plain")
     wi, wo = _random_pairs(22, 128)
-    a, b = np.asarray(cloth.eval(p, wi, wo)), np.asarray(cloth.eval(p, wo, wi))
+    a, b = _call(cloth.eval, p, wi, wo), _call(cloth.eval, p, wo, wi)
     assert np.max(np.abs(a - b) / np.maximum(a, b).clip(1e-12)) > 0.1  # cos theta_i(t) / N.w_i is asymmetric
 
 
 def test_k4_masking_reweighting_properties():
     rng = np.random.default_rng(3)
     x = jnp.asarray(rng.uniform(-1, 1, (6, 2000)))
-    M = np.asarray(weave.masking(x[1], x[2], x[4], x[5], 20 * D))
-    P = np.asarray(weave.reweighting(x[0], x[1], x[3], x[4], 20 * D))
+    M = np.asarray(_masking(x[1], x[2], x[4], x[5], 20 * D))
+    P = np.asarray(_reweighting(x[0], x[1], x[3], x[4], 20 * D))
     assert M.min() >= 0 and M.max() <= 1 and P.min() >= 0 and P.max() <= 1
     # back-facing (cos phi < 0, i.e. w.n < 0) -> M = 0 and P = 0
     back = np.asarray(x[1] < 0)
     assert np.all(M[back] == 0) and np.all(P[back] == 0)
     # w_i = w_r: u(0) = 1 -> M = min = M(t, w)
-    Mi, Pi = (np.asarray(a) for a in weave.single(x[0], x[1], x[2]))
-    np.testing.assert_allclose(np.asarray(weave.masking(x[1], x[2], x[1], x[2], 20 * D)), Mi, atol=1e-14)
-    np.testing.assert_allclose(np.asarray(weave.reweighting(x[0], x[1], x[0], x[1], 20 * D)), Pi, atol=1e-14)
+    Mi, Pi = (np.asarray(a) for a in _single(x[0], x[1], x[2]))
+    np.testing.assert_allclose(np.asarray(_masking(x[1], x[2], x[1], x[2], 20 * D)), Mi, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(_reweighting(x[0], x[1], x[0], x[1], 20 * D)), Pi, atol=1e-14)
     # "horizontal" thread: w in the (t, n) plane (w.v = 0) -> M = 1
-    assert np.all(np.asarray(weave.masking(jnp.abs(x[1]), 0.0, jnp.abs(x[4]), 0.0, 20 * D)) == 1.0)
+    zero = jnp.zeros_like(x[2])
+    assert np.all(np.asarray(_masking(jnp.abs(x[1]), zero, jnp.abs(x[4]), zero, 20 * D)) == 1.0)
     # P = 1 everywhere (reweighting off) reduces Eq. 5.20 to 5.17, and M = 1 further to 5.13:
     # R = sum_j a_j sum_t f_s cos theta_i / (J T)
     p = _p("silk_shot", masking=False, reweighting=False, thread_energy="thesis")
@@ -177,29 +220,38 @@ def test_rotating_the_weave_by_90_degrees_swaps_the_families():
     swapped = cloth.from_weave([weave.Curve(-c2.offsets, c2.lengths), c1], (0.3, 0.7),
                                albedo=[(0.1, 0.2, 0.6), (0.5, 0.2, 0.1)],
                                **{**kw, "k_d": (0.5, 0.2), "gamma_s": (12.0, 6.0), "gamma_v": (30.0, 12.0)})
+    p, swapped = _pad(p), _pad(swapped)
     wi, wo = _random_pairs(40, 64)
-    a = np.asarray(cloth.eval(p.replace(rotation=90.0), wi, wo))
-    np.testing.assert_allclose(a, np.asarray(cloth.eval(swapped, wi, wo)), rtol=1e-10)
-    assert not np.allclose(a, np.asarray(cloth.eval(p, wi, wo)), rtol=1e-3)
+    a = _call(cloth.eval, p.replace(rotation=90.0), wi, wo)
+    np.testing.assert_allclose(a, _call(cloth.eval, swapped, wi, wo), rtol=1e-10)
+    assert not np.allclose(a, _call(cloth.eval, p, wi, wo), rtol=1e-3)
     # the plane through family 1 of the rotated weave is the plane through y
     q = _p("silk_crepe_de_chine")
-    s0 = np.asarray(cloth.eval(q, *_plane(0.0, 30.0, np.arange(-80, 81, 10))))
-    s1 = np.asarray(cloth.eval(q.replace(rotation=90.0), *_plane(90.0, 30.0, np.arange(-80, 81, 10))))
+    s0 = _call(cloth.eval, q, *_plane(0.0, 30.0, np.arange(-80, 81, 10)))
+    s1 = _call(cloth.eval, q.replace(rotation=90.0), *_plane(90.0, 30.0, np.arange(-80, 81, 10)))
     np.testing.assert_allclose(s0, s1, rtol=1e-9, atol=1e-14)
 
 
 def test_rotation_average_is_the_mean_of_rotated_weaves():
     """n_rotations = K averages eval, the radiance response and the pdf over the weave rotated by 360 k / K deg;
     the sampler draws from that mixture (its weights are f cos / pdf and its mean matches the albedo)."""
-    p = _p("silk_crepe_de_chine", n_samples=8)
+    p = _p("silk_crepe_de_chine")  # T = 16: n_rotations = 1 runs the programs of the tests above
     K = 4
     wi, wo = _random_pairs(30, 65)
     pk = p.replace(n_rotations=K)
-    # call_chunked: every call runs at the one chunk shape, so eval(pk) is the program of the albedo
-    # quadrature below and pdf(pk) that of the sampler's pdf check (one compilation each, not two)
-    for fn in (cloth.eval, cloth.radiance_response, cloth.pdf):
-        ref = np.mean([testing.call_chunked(fn, p.replace(rotation=360.0 * k / K), wi, wo) for k in range(K)], axis=0)
-        np.testing.assert_allclose(testing.call_chunked(fn, pk, wi, wo), ref, rtol=1e-10, atol=1e-14)
+
+    # eval, the radiance response and the pdf of the rotation average compiled as one program (the
+    # response is most of eval: apart, the three compile 70 % longer), which the albedo quadrature
+    # below runs too; called like call_chunked, at its one chunk shape
+    @jax.jit
+    def three(p, wi, wo):
+        return jnp.concatenate([cloth.eval.kernel(p, wi, wo), cloth.radiance_response.kernel(p, wi, wo),
+                                cloth.pdf.kernel(p, wi, wo)[..., None]], axis=-1)
+
+    got = _call(three, pk, wi, wo)
+    for fn, part in ((cloth.eval, got[:, :3]), (cloth.radiance_response, got[:, 3:6]), (cloth.pdf, got[:, 6])):
+        ref = np.mean([_call(fn, p.replace(rotation=360.0 * k / K), wi, wo) for k in range(K)], axis=0)
+        np.testing.assert_allclose(part, ref, rtol=1e-10, atol=1e-14)
     # sampling from the mixture: mean weight = albedo (quadrature), within 4 standard errors
     th = 0.6
     wi1 = Vec3(*(jnp.full((1,), c) for c in (np.sin(th), 0.0, np.cos(th))))
@@ -207,9 +259,10 @@ def test_rotation_average_is_the_mean_of_rotated_weaves():
     wi_n = Vec3(*(jnp.broadcast_to(c, (n,)) for c in wi1))
     wo_s, weight, pdf_s = cloth.sample(pk, wi_n, jax.random.PRNGKey(5))
     ok = np.asarray(pdf_s) > 0
-    np.testing.assert_allclose(testing.call_chunked(cloth.pdf, pk, wi_n, wo_s)[ok], np.asarray(pdf_s)[ok], rtol=1e-9)
+    np.testing.assert_allclose(_call(cloth.pdf, pk, wi_n, wo_s)[ok], np.asarray(pdf_s)[ok], rtol=1e-9)
     w = np.asarray(weight)
-    albedo = np.asarray(testing.albedo_quadrature(cloth.MODEL, pk, wi1, n_theta=96, n_phi=192))[0]
+    model = dataclasses.replace(cloth.MODEL, eval=lambda q, wi, wo: three(q, wi, wo)[..., :3])  # (cloth's eval)
+    albedo = np.asarray(testing.albedo_quadrature(model, pk, wi1, n_theta=96, n_phi=192))[0]
     se = w.std(axis=0) / np.sqrt(n)
     assert np.all(np.abs(w.mean(axis=0) - albedo) < 4 * se + 2e-3 * albedo), (w.mean(axis=0), albedo, se)
 
@@ -266,9 +319,9 @@ def test_k6_linen_vertical_equals_horizontal_diagonal_differs():
     p = _p("linen_plain")
     x = np.arange(-80.0, 80.1, 10.0)
     for ti in (0.0, 30.0, 60.0):
-        h = np.asarray(cloth.eval(p, *_plane(0.0, ti, x)))
-        v = np.asarray(cloth.eval(p, *_plane(90.0, ti, x)))
-        d = np.asarray(cloth.eval(p, *_plane(45.0, ti, x)))
+        h = _call(cloth.eval, p, *_plane(0.0, ti, x))
+        v = _call(cloth.eval, p, *_plane(90.0, ti, x))
+        d = _call(cloth.eval, p, *_plane(45.0, ti, x))
         np.testing.assert_allclose(h, v, rtol=1e-10)
         if ti > 0:
             assert np.max(np.abs(d - h) / h) > 0.02
@@ -281,8 +334,8 @@ def test_anisotropic_highlights_follow_the_thread_direction():
     # Silk crepe: the +-70 deg off-specular highlights (2 x 35 deg) live in the plane of the flat threads only
     p = _p("silk_crepe_de_chine")
     x = np.array([0.0, 70.0])
-    along = np.asarray(cloth.eval(p, *_plane(0.0, 0.0, x))).mean(-1)
-    across = np.asarray(cloth.eval(p, *_plane(90.0, 0.0, x))).mean(-1)
+    along = _call(cloth.eval, p, *_plane(0.0, 0.0, x)).mean(-1)
+    across = _call(cloth.eval, p, *_plane(90.0, 0.0, x)).mean(-1)
     assert along[1] > 1.5 * along[0] and across[1] < across[0]
 
 
@@ -292,8 +345,8 @@ def test_silk_shot_colour_shift_between_modes():
     # (2 x 25 deg) is green
     p = _p("silk_shot")
     x = np.arange(-80.0, 81.0, 10.0)
-    along = np.asarray(cloth.eval(p, *_plane(0.0, 0.0, x)))
-    across = np.asarray(cloth.eval(p, *_plane(90.0, 0.0, x)))
+    along = _call(cloth.eval, p, *_plane(0.0, 0.0, x))
+    across = _call(cloth.eval, p, *_plane(90.0, 0.0, x))
     hue_along, hue_across = along[:, 1] / along[:, 0], across[:, 1] / across[:, 0]
     assert np.max(np.abs(np.log(hue_along / hue_across))) > np.log(1.5)
     k50 = list(x).index(50.0)
@@ -302,9 +355,9 @@ def test_silk_shot_colour_shift_between_modes():
 
 def test_velvet_is_bright_at_grazing():
     p = _p("velvet")
-    normal = np.asarray(cloth.eval(p, *_plane(0.0, 0.0, [0.0]))).mean()
-    graze = np.asarray(cloth.eval(p, *_plane(0.0, 75.0, [-75.0]))).mean()  # retro-reflection at grazing
-    graze_side = np.asarray(cloth.eval(p, *_plane(90.0, 75.0, [-75.0]))).mean()
+    normal = _call(cloth.eval, p, *_plane(0.0, 0.0, [0.0])).mean()
+    graze = _call(cloth.eval, p, *_plane(0.0, 75.0, [-75.0])).mean()  # retro-reflection at grazing
+    graze_side = _call(cloth.eval, p, *_plane(90.0, 75.0, [-75.0])).mean()
     assert graze > 10 * normal and graze_side > 100 * normal
 
 
@@ -320,7 +373,7 @@ def _albedo(p, theta_i_deg, phi_deg=45.0, n_theta=64, n_phi=128):
 def test_energy_bound():
     """The thesis' formulas (incident_cosine="thread", thread_energy="thesis") exceed albedo 1 near grazing (silk_shot
     7.6 at 89 deg, azimuth 45 deg); the defaults (the patch gate and the thread energy cap, D-C10) keep it < 0.9."""
-    p = _p("silk_shot", n_samples=8)
+    p = _p("silk_shot")  # (T = 16: the default options run the program of the tests above)
     thesis = cloth.thesis_form(p)
     a_thesis = _albedo(thesis, [0.0, 45.0, 75.0, 89.0])
     assert a_thesis[:3].max() < 0.5, a_thesis
@@ -350,8 +403,10 @@ def test_thread_energy_tables_are_the_exit_albedo_of_one_flat_sample():
     p = _one_sample(0.0)
     nodes = [24, 32, 40, 44]  # theta_i = 0, 30, 60, 75 deg (table nodes: no interpolation)
     th = np.degrees(cloth_energy.theta_nodes()[nodes])
-    C2 = np.asarray(cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)[0])[0, nodes]
-    a_thesis = _albedo(p.replace(thread_energy="thesis"), th, 0.0, n_theta=128, n_phi=256)
+    C2 = np.asarray(_exit_tables(p)[0])[0, nodes]
+    # (floor "none": at these incidences, <= 75 deg, the default floor is inactive, and this is the
+    # program of the tilted-sample test below)
+    a_thesis = _albedo(p.replace(thread_energy="thesis", normalization_floor="none"), th, 0.0, n_theta=128, n_phi=256)
     np.testing.assert_allclose(a_thesis, C2, rtol=5e-3)  # the tables' own quadrature: measured 3.1e-3
     assert C2[:, 0].min() > 1.2 and C2[:3, 2].max() < 1.0  # capped in red; blue untouched up to 60 deg
     a = _albedo(p, th, 0.0, n_theta=128, n_phi=256)
@@ -364,7 +419,7 @@ def test_thread_energy_interpolation_batched_tables():
     from appearance_jax.bsdf.cloth import energy as cloth_energy
 
     p = _p("silk_shot")
-    C2 = cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)[0]  # (J, N, bands)
+    C2 = _exit_tables(p)[0]  # (J, N, bands)
     th = jnp.asarray(np.random.default_rng(4).uniform(-1.6, 1.6, (40, 2, 5)))
     fast, batched = cloth_energy._interp(C2, th), cloth_energy._interp(C2[None], th)
     np.testing.assert_array_equal(np.asarray(fast), np.asarray(batched))
@@ -384,7 +439,7 @@ def test_thread_energy_estimate_bounds_tilted_samples():
         t = np.array([np.cos(alpha * D), 0.0, np.sin(alpha * D)])
         wi = np.stack([np.sin(th * D), 0 * th, np.cos(th * D)], 1)
         th_t = np.arcsin(wi @ t)
-        tables = cloth_energy.exit_tables(p, p.eta, p.albedo, p.k_d, p.gamma_s * D, p.gamma_v * D)
+        tables = _exit_tables(p)
         rho = np.asarray(cloth_energy.exit_albedo(tables, jnp.asarray(th_t)[:, None, None],
                                                   jnp.full((len(th), 1, 1), alpha * D)))[:, 0, 0]
         a_thesis = _albedo(p.replace(thread_energy="thesis", normalization_floor="none"), th, 0.0, n_theta=128,
@@ -396,9 +451,9 @@ def test_thread_energy_estimate_bounds_tilted_samples():
 def _bright_weave(**kw):
     """A bright random weave (A, k_d >= 0.8) that sends out more than it receives near grazing with every sample
     capped but Eq. 5.20's denominator: albedo 1.16 at 89.5 deg (light azimuth 45 deg, T = 16)."""
-    return cloth.from_weave([weave.crossing(54.03, 0.77, 1.45), weave.plain(12.55)], (0.36, 0.64), eta=2.4,
-                            albedo=((0.85, 0.9, 0.92), (0.84, 0.95, 0.91)), k_d=(0.92, 0.87), gamma_s=(17.4, 20.3),
-                            gamma_v=(29.3, 41.2), rotation=51.9, n_samples=16, **kw)
+    return _pad(cloth.from_weave([weave.crossing(54.03, 0.77, 1.45), weave.plain(12.55)], (0.36, 0.64), eta=2.4,
+                                 albedo=((0.85, 0.9, 0.92), (0.84, 0.95, 0.91)), k_d=(0.92, 0.87),
+                                 gamma_s=(17.4, 20.3), gamma_v=(29.3, 41.2), rotation=51.9, n_samples=16, **kw))
 
 
 def test_normalization_floor_bounds_the_albedo():
@@ -415,8 +470,8 @@ def test_normalization_floor_bounds_the_albedo():
     # below 75 deg incidence the default is the thesis' normalisation, bit for bit
     wi, wo = _random_pairs(11, 400)
     low = np.asarray(wi.z) > math.cos(75.0 * D)
-    f = np.asarray(cloth.eval(p, wi, wo))
-    f_none = np.asarray(cloth.eval(p.replace(normalization_floor="none"), wi, wo))
+    f = _call(cloth.eval, p, wi, wo)  # (the programs of the quadratures above)
+    f_none = _call(cloth.eval, p.replace(normalization_floor="none"), wi, wo)
     np.testing.assert_array_equal(f[low], f_none[low])
     assert low.sum() > 200 and not np.allclose(f[~low], f_none[~low])
 
@@ -425,14 +480,19 @@ def test_normalization_floor_weights_are_bounded_by_incident_ones():
     """The mechanism of D-C11: where the floor is at full strength every weight a_j P(t, w_i, w_r) / D is <= the
     w_i-only weight a_j P(t, w_i) / F, and those sum to 1 (both normalisations)."""
     wi, wo = _random_pairs(5, 300)
-    for normalization in ("all", "per_family"):
-        p = _bright_weave(normalization=normalization, normalization_floor="always")
+
+    @jax.jit  # one program per normalisation (eagerly, ~50 operations compiled one by one)
+    def weights(p, wi, wo):
         alpha, cb, sb = cloth_model._family(p)
         it, in_, iv = cloth_model._components(wi, alpha, cb, sb)
         ot, on, _ = cloth_model._components(wo, alpha, cb, sb)
         P = weave.reweighting(it, in_, ot, on, p.masking_width * D)
         P_i = weave.single(it, in_, iv)[1]
-        w, W, s = cloth_model._weights(p, P, P_i, jnp.asarray(wi.z))
+        return cloth_model._weights(p, P, P_i, jnp.asarray(wi.z))
+
+    for normalization in ("all", "per_family"):
+        p = _bright_weave(normalization=normalization, normalization_floor="always")
+        w, W, s = weights(p, wi, wo)
         assert np.all(np.asarray(s) == 1.0)
         assert np.all(np.asarray(w) <= np.asarray(W) * (1 + 1e-12))
         np.testing.assert_allclose(np.asarray(W).sum(axis=(-2, -1)), 1.0, rtol=1e-12)
@@ -461,7 +521,7 @@ def test_energy_bound_all_presets_and_random(name):
 
 
 def test_gradients_forward_mode_vs_finite_differences():
-    p = _p("silk_crepe_de_chine", n_samples=8)
+    p = cloth.PRESETS["silk_crepe_de_chine"].replace(n_samples=8)  # (its own programs: not padded)
     wi, wo = _random_pairs(60, 16)
     c = jnp.asarray(np.random.default_rng(1).uniform(size=(16, 3)))
     names = ("eta", "albedo", "k_d", "gamma_s", "gamma_v", "offsets")
@@ -479,9 +539,9 @@ def test_grazing_is_zero_and_finite():
     p = _p("velvet")
     wi = Vec3(jnp.array([1.0, 0.6, 0.0]), jnp.array([0.0, 0.0, 0.0]), jnp.array([0.0, -0.8, 1.0]))
     wo = Vec3(jnp.array([0.0, 0.0, 1.0]), jnp.array([0.0, 0.0, 0.0]), jnp.array([1.0, 1.0, 0.0]))
-    f = np.asarray(cloth.eval(p, wi, wo))
+    f = _call(cloth.eval, p, wi, wo)
     assert np.all(f == 0.0)
-    assert np.all(np.asarray(cloth.pdf(p, wi, wo)) == 0.0)
+    assert np.all(_call(cloth.pdf, p, wi, wo) == 0.0)
 
 
 def test_bad_parameters_are_named():
@@ -517,15 +577,18 @@ def test_cloth_weave_families_are_cloth_with_scaled_curves():
     wi, wo = _random_pairs(20, 66)
     for kind in ("plain", "satin", "twill"):
         p = cloth_weaves.Params(weave=kind, alpha=20.0, n_rotations=1, n_samples=4)
+        # (the cloth.Params padded to K_PAD control points: the three weaves run one program)
         np.testing.assert_allclose(np.asarray(cloth_weaves.eval(p, wi, wo)),
-                                   np.asarray(cloth.eval(cloth_weaves.to_cloth(p), wi, wo)), rtol=1e-12)
+                                   np.asarray(cloth.eval(_pad(cloth_weaves.to_cloth(p)), wi, wo)), rtol=1e-12)
     q = cloth_weaves.to_cloth(cloth_weaves.Params(weave="satin", alpha=32.0))
     front = cloth.PRESETS["polyester_satin_front"]
     np.testing.assert_allclose(np.asarray(q.offsets)[0], np.asarray(front.offsets)[0])
     np.testing.assert_allclose(np.asarray(q.lengths)[0], np.asarray(front.lengths)[0])
     p = cloth_weaves.Params(weave="twill", n_rotations=1, n_samples=4)
-    testing.assert_gradients(jax.jit(lambda a: cloth_weaves.eval.kernel(p.replace(alpha=a), wi, wo)), 20.0,
-                             step=1e-4 / 20.0, rtol=1e-5, atol=1e-9, elementwise=True, mode="fwd", name="cloth_weaves")
+    f = lambda a: cloth_weaves.eval.kernel(p.replace(alpha=a), wi, wo)  # noqa: E731
+    jac_val = jax.jit(jax.jacfwd(lambda a: (f(a), f(a)), has_aux=True))  # derivative and value: one program
+    testing.assert_gradients(lambda a: jac_val(a)[1], 20.0, step=1e-4 / 20.0, rtol=1e-5, atol=1e-9, elementwise=True,
+                             grad_fn=lambda a: jac_val(a)[0], name="cloth_weaves")
     with pytest.raises(ValueError, match="weave"):
         cloth_weaves.Params(weave="jersey")
     with pytest.raises(ValueError, match="alpha"):
