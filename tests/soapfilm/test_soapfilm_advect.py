@@ -154,7 +154,8 @@ def test_sharp_edge_over_the_pole_ss5():
     n, dt = 4, 2 * h
     beta = n * dt
     n0 = _rotate(axis, -beta / 2, Vec3(1.0, 0.0, 0.0))
-    f0 = lambda p: jnp.where(dot(n0, p) > 0, 1.0, 0.0)
+    # (float64, not weakly typed: the signature, and so the compiled loops, of the other tests)
+    f0 = lambda p: jnp.where(dot(n0, p) > 0, 1.0, 0.0).astype(jnp.float64)
     exact = np.asarray(f0(_rotate(axis, -beta, P)))
     dist = np.arcsin(np.abs(np.asarray(dot(_rotate(axis, beta, n0), P))))  # to the exact edge
     cap = th < 10 * h  # the polar cap the edge crosses

@@ -223,19 +223,29 @@ def test_volume_drift_is_bounded_and_reported():
 # -- the linearised system ------------------------------------------------------------------------
 @pytest.mark.parametrize("Cr", [0.0, 1.0])
 def test_small_oscillation_period_and_decay(Cr):
-    grid = SphereGrid(64, 128)
+    # On GRID, sampled by carrying the run on frame after frame: every call is the default
+    # program of the runs above (_SHARED_RUNS), where `every` would compile one of its own (the
+    # frames of `every` are run by the README's flow example, tests/test_readme.py). Measured
+    # half-period errors 0.3 % / 1.3 % (Cr = 0 / 1; 0.1 % / 1.1 % at 64 x 128, where this test
+    # ran before: the time step, not the grid, dominates at Cr = 1) against the 2 % asserted;
+    # decay rates within 3 % / 1 % of the expected.
+    grid = GRID
     M, dt, eps = 0.83, 0.02, 1e-3
     P2 = _P2(grid)
     omega = math.sqrt(M * 6 - Cr**2 / 4)
-    n_frames = 96  # fixed (static), steps per frame traced: both cases share one program
+    n_frames = 96
     every = math.ceil(1.6 * 2 * math.pi / omega / dt / n_frames)
-    r = flow.simulate(grid, flow.FlowParams(M, Cr, 0.0), flow.rest_state(grid, 1.0, 1 + eps * P2), dt,
-                      n_frames * every, every=every)
+    carry, frames, times = flow.start(grid, flow.rest_state(grid, 1.0, 1 + eps * P2)), [], []
+    for _ in range(n_frames):
+        carry = flow.simulate(grid, flow.FlowParams(M, Cr, 0.0), None, dt, every, carry=carry).carry
+        frames.append(np.asarray(carry.state.eta))
+        times.append(float(carry.t))
+    np.testing.assert_allclose(times, dt * every * np.arange(1, n_frames + 1), rtol=1e-12)
     A = grid.cell_areas()
     # Gamma / eta = 1 + eps P2 is carried with the fluid, which barely moves: eta = Gamma / (1 + eps P2)
     # oscillates about 1 - eps P2, so eta - 1 + eps P2 is the oscillating part
-    c = np.einsum("kij,ij->k", (np.asarray(r.frames) - 1) * P2, A) / np.sum(P2 * P2 * A) + eps
-    t = np.asarray(r.frame_times)
+    c = np.einsum("kij,ij->k", (np.stack(frames) - 1) * P2, A) / np.sum(P2 * P2 * A) + eps
+    t = np.asarray(times)
     z = np.nonzero(np.sign(c[1:]) != np.sign(c[:-1]))[0]
     tz = t[z] - c[z] * (t[z + 1] - t[z]) / (c[z + 1] - c[z])
     assert len(tz) >= 3
