@@ -52,6 +52,7 @@ def closed_form(s, n, p):
 # and F_SHARED families: the rays each test checks are embedded in a grid of that size
 # (_grid_with) and picked back out by index, and the circle's trace is a module fixture.
 N_RAYS, F_SHARED = 300, 6
+N_WAVE = 23  # offsets of the flatland.trace wave traces (those of test_flatland_smooth.py's H_WAVE)
 S_CLOSED = np.concatenate([np.linspace(-0.999, -0.01, 40), np.linspace(0.013, 0.9995, 40)])
 S_TRACER = np.array([-0.97, -0.9, -0.7, -0.3, 0.1, 0.4, 0.8, 0.86, 0.95])
 S_AXIS = np.array([-0.95, -0.6, -0.2, 0.1, 0.5, 0.8, 0.9, 0.97])
@@ -121,25 +122,28 @@ def test_circle_equals_flatland_tracer(circle):
     propagates along -y in the (y, z) section and launches offset h at z = -h, so h = s."""
     s, index, fan = circle
     F = 5
-    f = jax.tree_util.tree_map(lambda a: a[:F, index(S_TRACER)], fan._replace(s=fan.s[None]))
-    s = S_TRACER
+    f = jax.tree_util.tree_map(lambda a: np.asarray(a)[:F, index(S_TRACER)], fan._replace(s=fan.s[None]))
+    s, n = S_TRACER, S_TRACER.size
     wi = fiber_direction(0.0, 0.0)
-    rec = fl.trace(fl.cylinder(N_WATER), wi, jnp.asarray(s), max_events=F, wave=True, polarized=True)
+    # the offsets repeated to N_WAVE, the first n read: the program of the same traces in
+    # test_flatland_smooth.py (its water cylinder), compiled once for both files
+    h = jnp.asarray(np.resize(s, N_WAVE))
+    rec = fl.trace(fl.cylinder(N_WATER), wi, h, max_events=F, wave=True, polarized=True)
     # (wave=True as above: the same static configuration, so the same compiled program)
-    par = fl.trace(fl.cylinder(N_WATER), wi, jnp.asarray(s), max_events=F, wave=True, polarized=True,
+    par = fl.trace(fl.cylinder(N_WATER), wi, h, max_events=F, wave=True, polarized=True,
                    field=Vec3(0.0, 0.0, 1.0 + 0j))    # in the section plane: parallel
+    rec, par = (jax.tree_util.tree_map(np.asarray, r) for r in (rec, par))  # (numpy: no eager gathers)
     dy, dz = -float(wi.y), -float(wi.z)
     for p in range(F):
-        assert np.all(np.asarray(rec.lobe[p]) == p)
-        oy, oz = np.asarray(rec.direction.y[p]), np.asarray(rec.direction.z[p])
+        assert np.all(rec.lobe[p, :n] == p)
+        oy, oz = rec.direction.y[p, :n], rec.direction.z[p, :n]
         psi = np.arctan2(dy * oz - dz * oy, dy * oy + dz * oz)
-        np.testing.assert_allclose(np.asarray(f.psi[p]), psi, atol=1e-12)
-        np.testing.assert_allclose(np.asarray(f.opl[p]), np.asarray(rec.opl[p]), atol=1e-12)
-        np.testing.assert_array_equal(np.asarray(f.foci[p]), np.asarray(rec.foci[p]))
-        np.testing.assert_allclose(np.abs(np.asarray(f.amp[p, :, 0])), np.abs(np.asarray(rec.field.x[p])),
-                                   atol=1e-12)
-        e_par = np.sqrt(sum(np.abs(np.asarray(c[p])) ** 2 for c in par.field))
-        np.testing.assert_allclose(np.abs(np.asarray(f.amp[p, :, 1])), e_par, atol=1e-12)
+        np.testing.assert_allclose(f.psi[p], psi, atol=1e-12)
+        np.testing.assert_allclose(f.opl[p], rec.opl[p, :n], atol=1e-12)
+        np.testing.assert_array_equal(f.foci[p], rec.foci[p, :n])
+        np.testing.assert_allclose(np.abs(f.amp[p, :, 0]), np.abs(rec.field.x[p, :n]), atol=1e-12)
+        e_par = np.sqrt(sum(np.abs(c[p, :n]) ** 2 for c in par.field))
+        np.testing.assert_allclose(np.abs(f.amp[p, :, 1]), e_par, atol=1e-12)
 
 
 def test_circle_axis_crossings_brute_force(circle):
@@ -147,7 +151,7 @@ def test_circle_axis_crossings_brute_force(circle):
     n = N_WATER
     _, index, fan = circle
     s, F = S_AXIS, 5
-    f = fan._replace(axis=fan.axis[:, index(s)])
+    f = fan._replace(axis=np.asarray(fan.axis)[:, index(s)])
     for j, h in enumerate(s):
         x = np.array([-np.sqrt(1 - h * h), h])
         d = np.array([1.0, 0.0])
@@ -385,7 +389,7 @@ def test_foci_of_a_flattened_drop_equal_neighbour_crossings():
     # traced within N_RAYS rays (the shared compiled shape; extent about (-0.93, 0.97))
     grid, index = _grid_with(s, -0.9, 0.95)
     fan = trace_drop(curve, N_WATER, s=grid, families=F_SHARED, inclination=0.15)
-    f = fan._replace(foci=fan.foci[:, index(s)], valid=fan.valid[:, index(s)])
+    f = fan._replace(foci=np.asarray(fan.foci)[:, index(s)], valid=np.asarray(fan.valid)[:, index(s)])
     chain = jax.jit(_chain, static_argnums=4)            # one program, not hundreds of eager ops
 
     def polylines(v):

@@ -29,25 +29,44 @@ from appearance_jax.microfacet import distribution as mf
 from appearance_jax.optics.fresnel import fresnel_dielectric
 
 KEY = jax.random.PRNGKey(7)
+# Compilation dominates: nee_bcsdf compiles one program per (paths, lobes, events) and section
+# layout. The next-event estimates below therefore all run NEE_PATHS paths, NEE_LOBES lobes and
+# NEE_EVENTS events on a one-shape rough fiber (one program): a test that needs fewer lobes or
+# events reads the first ones (R, TT and TRT end within 3 events; the first hit's connection,
+# the R estimate, does not depend on later events).
+NEE_PATHS, NEE_LOBES, NEE_EVENTS = 2 ** 14, 4, 8
+
+
+def _dir(theta, phi):
+    """fiber_direction of float64 angles: from Python floats the direction is weakly typed, a
+    different signature for the tracer, which then compiles its program once more."""
+    return fiber_direction(np.float64(theta), np.float64(phi))
+
+
+@jax.jit
+def _r_integrand(ny, nz, wi, wo, eta, alpha):
+    """F D G1(i) G1(o) / 4 at the ellipse points of normal (0, ny, nz), 0 where either direction
+    is below the surface (one compiled program: eagerly its ~35 operations compile one by one)."""
+    n = ny.shape[0]
+    N = Vec3(jnp.zeros(n), ny, nz)
+    fr = Frame.from_normal_tangent(N, Vec3(jnp.ones(n), jnp.zeros(n), jnp.zeros(n)))
+    il = fr.to_local(Vec3(*[jnp.broadcast_to(c, (n,)) for c in wi]))
+    ol = fr.to_local(Vec3(*[jnp.broadcast_to(c, (n,)) for c in wo]))
+    h = normalize(il + ol)
+    F, _, _, _ = fresnel_dielectric(jnp.abs(dot(il, h)), eta)
+    val = F * mf.D("ggx", h, alpha, alpha) * mf.G1("ggx", il, h, alpha) * mf.G1("ggx", ol, h, alpha) / 4
+    return jnp.where((il.z > 0) & (ol.z > 0), val, 0.0)
 
 
 def r_lobe_quadrature(wi, wo, eta, alpha, b=1.0, n=20001):
     """S_R cos(theta_i) = 1 / (2 D_o cos(theta_o)) int F D G1(i) G1(o) / 4 dl over the
     points of the ellipse y^2/b^2 + z^2 = 1 that see both directions (Eqs. 4.12, 4.28)."""
     g = np.linspace(-np.pi, np.pi, n)
-    y, z = b * np.cos(g), np.sin(g)
     ny, nz = np.cos(g) / b, np.sin(g)
     nn = np.hypot(ny, nz)
     ny, nz = ny / nn, nz / nn
     dl = np.hypot(b * np.sin(g), np.cos(g))          # |dp/dgamma|
-    N = Vec3(jnp.zeros(n), jnp.asarray(ny), jnp.asarray(nz))
-    fr = Frame.from_normal_tangent(N, Vec3(jnp.ones(n), jnp.zeros(n), jnp.zeros(n)))
-    il = fr.to_local(Vec3(*[jnp.full(n, float(c)) for c in wi]))
-    ol = fr.to_local(Vec3(*[jnp.full(n, float(c)) for c in wo]))
-    h = normalize(il + ol)
-    F, _, _, _ = fresnel_dielectric(jnp.abs(dot(il, h)), eta)
-    val = F * mf.D("ggx", h, alpha, alpha) * mf.G1("ggx", il, h, alpha) * mf.G1("ggx", ol, h, alpha) / 4
-    val = np.where((np.asarray(il.z) > 0) & (np.asarray(ol.z) > 0), np.asarray(val), 0.0)
+    val = np.asarray(_r_integrand(jnp.asarray(ny), jnp.asarray(nz), wi, wo, eta, alpha))
     u = np.array([float(wo.y), float(wo.z)])
     u /= np.linalg.norm(u)
     D_o = np.sqrt(b * b * u[1] ** 2 + u[0] ** 2)
@@ -59,18 +78,18 @@ def r_lobe_quadrature(wi, wo, eta, alpha, b=1.0, n=20001):
 def test_nee_r_lobe_equals_quadrature_of_eq_4_12(ecc):
     eta, alpha = 1.55, 0.25
     sec = fl.fiber(eta, roughness=alpha, eccentricity=ecc)
-    wi = fiber_direction(0.3, 0.4)
+    wi = _dir(0.3, 0.4)
     b = np.sqrt(1 - ecc ** 2)
     for th, ph in [(-0.4, 0.5), (-0.2, 2.0), (-0.5, -1.2), (-0.3, 3.0)]:
-        wo = fiber_direction(th, ph)
-        v, se = fl.nee_bcsdf(sec, wi, wo, KEY, 2 ** 13, n_lobes=3, max_events=1)
+        wo = _dir(th, ph)
+        v, se = fl.nee_bcsdf(sec, wi, wo, KEY, NEE_PATHS, n_lobes=NEE_LOBES, max_events=NEE_EVENTS)
         ref = r_lobe_quadrature(wi, wo, eta, alpha, b)
         assert abs(float(v[0, 0]) - ref) < 4 * float(se[0, 0]) + 1e-9 * ref, (th, ph, float(v[0, 0]), ref)
 
 
 def test_histogram_agrees_with_next_event_estimates_per_lobe():
     sec = fl.fiber(1.55, 0.2, roughness=0.3)
-    wi = fiber_direction(0.3, 0.0)
+    wi = _dir(0.3, 0.0)
     hist = fl.trace_fiber(sec, wi, KEY, 2 ** 18, n_theta=60, n_phi=120, chunk=2 ** 15, max_events=8)
     b = fl.bcsdf_from_histogram(hist)
     S, se = np.asarray(b.S[..., 0]) * np.cos(0.3), np.asarray(b.S_se[..., 0]) * np.cos(0.3)
@@ -82,7 +101,8 @@ def test_histogram_agrees_with_next_event_estimates_per_lobe():
         assert ratio.reshape(-1)[best[-1]] > 10, p
         for it, ip in zip(*np.unravel_index(best, ratio.shape)):
             wo = fiber_direction(b.theta[it], b.phi[ip])
-            v, sv = fl.nee_bcsdf(sec, wi, wo, jax.random.PRNGKey(3), 2 ** 14, n_lobes=4, max_events=8)
+            v, sv = fl.nee_bcsdf(sec, wi, wo, jax.random.PRNGKey(3), NEE_PATHS, n_lobes=NEE_LOBES,
+                                 max_events=NEE_EVENTS)
             # a 3 x 3 degree bin average vs the value at its centre: allow 2 % curvature bias
             tol = 4 * np.hypot(se[p, it, ip], float(sv[p, 0])) + 0.02 * S[p, it, ip]
             assert abs(S[p, it, ip] - float(v[p, 0])) < tol, (p, it, ip, S[p, it, ip], float(v[p, 0]))
@@ -94,9 +114,9 @@ def test_reciprocity_of_a_tilted_rough_ellipse():
     ecc = 0.7
     sec = fl.fiber(1.55, roughness=0.2, tilt=np.radians(3.0), eccentricity=ecc)
     for (ti, pi_), (to, po) in [((0.3, 0.2), (-0.1, 1.9)), ((-0.2, 1.0), (0.4, -0.8))]:
-        wi, wo = fiber_direction(ti, pi_), fiber_direction(to, po)
-        a, sa = fl.nee_bcsdf(sec, wi, wo, KEY, 2 ** 14, max_events=6)      # S(i, o) cos_i
-        b, sb = fl.nee_bcsdf(sec, wo, wi, KEY, 2 ** 14, max_events=6)      # S(o, i) cos_o
+        wi, wo = _dir(ti, pi_), _dir(to, po)
+        a, sa = fl.nee_bcsdf(sec, wi, wo, KEY, NEE_PATHS, n_lobes=NEE_LOBES, max_events=NEE_EVENTS)  # S(i, o) cos_i
+        b, sb = fl.nee_bcsdf(sec, wo, wi, KEY, NEE_PATHS, n_lobes=NEE_LOBES, max_events=NEE_EVENTS)  # S(o, i) cos_o
         D = lambda phi: np.sqrt(1 - ecc ** 2 * np.sin(phi) ** 2)
         lhs, lhs_se = D(po) * a / np.cos(ti), D(po) * sa / np.cos(ti)
         rhs, rhs_se = D(pi_) * b / np.cos(to), D(pi_) * sb / np.cos(to)
@@ -186,7 +206,10 @@ def test_gradients_of_crn_estimates_match_finite_differences():
 @pytest.mark.parametrize("ax, ay, P", [(0.5, 0.5, 2.0), (0.5, 0.25, 1.3)])
 def test_periodic_row_covered_fraction_equals_closed_form(ax, ay, P):
     """w'_bb(psi) = min(1, W(psi) / (P cos psi)), W = 2 sqrt(a_x^2 cos^2 + a_y^2 sin^2) (M23)."""
-    sec = fl.ellipse_row(P, ax, ay)
+    # 4 neighbours per event (default 8; the tracer unrolls them, so fewer compile faster): the
+    # rays here reach at most 3.5 periods, and trunc = 0 below checks that none needed more, so
+    # the fraction is the one the default gives
+    sec = fl.ellipse_row(P, ax, ay, copies=4)
     for psi in (0.0, 0.5, 1.0, 1.3):
         wo = Vec3(jnp.asarray(0.0), jnp.asarray(np.sin(psi)), jnp.asarray(np.cos(psi)))
         m, se, trunc = fl.masking_fraction(sec, wo, KEY, 2 ** 14)
@@ -202,11 +225,12 @@ def test_open_half_circles_cover_their_projected_width():
     (the full circle: 2r), so the covered fraction is r (1 + cos psi) / (P cos psi)."""
     r, P = 0.5, 2.0
     for arc in ((0.0, np.pi), (np.pi, np.pi)):
-        sec = fl.ellipse_row(P, r, r, arc=arc)
+        sec = fl.ellipse_row(P, r, r, arc=arc, copies=1)  # (these rays reach 0.84 periods; trunc = 0 checked)
         for psi in (0.3, 0.6):
             wo = Vec3(jnp.asarray(0.0), jnp.asarray(np.sin(psi)), jnp.asarray(np.cos(psi)))
-            m, se, _ = fl.masking_fraction(sec, wo, KEY, 2 ** 14)
+            m, se, trunc = fl.masking_fraction(sec, wo, KEY, 2 ** 14)
             assert abs(float(m) - r * (1 + np.cos(psi)) / (P * np.cos(psi))) < max(4 * float(se), 1e-3)
+            assert float(trunc) == 0.0
 
 
 def test_bad_input_names_the_parameter():
