@@ -2,6 +2,10 @@
 reciprocity (what holds), sampling, gradients, limits. The pointwise comparison with
 Mitsuba 3's ``hair`` is in tests/validation/test_mitsuba_hair.py."""
 
+import functools
+import sys
+from pathlib import Path
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -14,6 +18,11 @@ from appearance_jax.core.frame import fiber_direction
 from appearance_jax.core.quadrature import gauss_legendre
 from appearance_jax.core.vec import Vec3
 
+# near-field eval, pdf, sample and lobes in batches of BATCH pairs with an h per pair (hair_batches:
+# one compiled program per function for this module, test_chiang_fast32 and the Mitsuba tests)
+sys.path.insert(0, str(Path(__file__).parent))
+from hair_batches import N as BATCH, batched  # noqa: E402
+
 MODEL = chiang.MODEL
 
 
@@ -21,8 +30,19 @@ def _dirs(theta, phi):
     return fiber_direction(jnp.asarray(theta, dtype=jnp.float64), jnp.asarray(phi, dtype=jnp.float64))
 
 
+_mlobe = jax.jit(chiang.longitudinal_lobe)
+_nlobe = jax.jit(chiang.azimuthal_lobe)
+_smooth_attenuation = jax.jit(fiber.smooth_attenuation, static_argnames="p_max")
+
+
 # ------------------------------------------------------------------------------------------
 # lobe functions
+
+
+@functools.lru_cache(maxsize=None)
+def _gauss_legendre_400():
+    """The 400-point rule on [0, 1] (an eigenvalue problem: computed once for the six cases)."""
+    return gauss_legendre(400, 0.0, 1.0)
 
 
 @pytest.mark.parametrize("v", [1e-4, 0.05, 110.0])
@@ -34,14 +54,14 @@ def test_mp_normalised(v, theta_i):
     total = 0.0
     for a, b in ((-np.pi / 2, pk), (pk, np.pi / 2)):
         # graded nodes: dense near the peak
-        t, w = gauss_legendre(400, 0.0, 1.0)
+        t, w = _gauss_legendre_400()
         if b == pk:
             x = b - (b - a) * t ** 3
             dx = (b - a) * 3 * t ** 2 * w
         else:
             x = a + (b - a) * t ** 3
             dx = (b - a) * 3 * t ** 2 * w
-        m = np.asarray(chiang.longitudinal_lobe(theta_i, jnp.asarray(x), v))
+        m = np.asarray(_mlobe(theta_i, jnp.asarray(x), v))
         total += np.sum(m * np.cos(x) * dx)
     assert abs(total - 1.0) < 1e-8, total
 
@@ -53,23 +73,23 @@ def test_mp_closed_form_and_symmetry():
     ti, to = rng.uniform(-1.5, 1.5, (2, 200))
     for v in (0.02, 0.1, 0.5, 3.0):
         ref = (1 / np.sinh(1 / v)) / (2 * v) * np.exp(-np.sin(ti) * np.sin(to) / v) * sps.i0(np.cos(ti) * np.cos(to) / v)
-        m = np.asarray(chiang.longitudinal_lobe(jnp.asarray(ti), jnp.asarray(to), v))
+        m = np.asarray(_mlobe(jnp.asarray(ti), jnp.asarray(to), v))
         assert np.allclose(m, ref, rtol=1e-10, atol=1e-300)
-        assert np.allclose(m, np.asarray(chiang.longitudinal_lobe(jnp.asarray(to), jnp.asarray(ti), v)), rtol=1e-12)
-    m = np.asarray(chiang.longitudinal_lobe(jnp.asarray(ti), jnp.asarray(to), 1e-6))
+        assert np.allclose(m, np.asarray(_mlobe(jnp.asarray(to), jnp.asarray(ti), v)), rtol=1e-12)
+    m = np.asarray(_mlobe(jnp.asarray(ti), jnp.asarray(to), 1e-6))
     assert np.all(np.isfinite(m)) and np.all(m >= 0)
     # the peak of a narrow lobe: M(ti, -ti) ~ 1 / sqrt(2 pi v) / cos(ti) (Gaussian limit)
     v = 1e-6
-    assert np.isclose(float(chiang.longitudinal_lobe(0.3, -0.3, v)), 1 / np.sqrt(2 * np.pi * v) / np.cos(0.3), rtol=1e-3)
+    assert np.isclose(float(_mlobe(0.3, -0.3, v)), 1 / np.sqrt(2 * np.pi * v) / np.cos(0.3), rtol=1e-3)
 
 
 def test_np_normalised_and_roughness_maps():
     x, w = gauss_legendre(1000, 0.0, np.pi)  # the lobe is even, with a kink at 0
     for bn in (0.05, 0.3, 0.9):
         s = chiang.azimuthal_scale(bn)
-        assert abs(2 * np.sum(np.asarray(chiang.azimuthal_lobe(jnp.asarray(x), s)) * w) - 1) < 1e-9
+        assert abs(2 * np.sum(np.asarray(_nlobe(jnp.asarray(x), s)) * w) - 1) < 1e-9
         # periodic: a shifted argument wraps
-        assert np.allclose(chiang.azimuthal_lobe(jnp.asarray(x) + 2 * np.pi, s), chiang.azimuthal_lobe(jnp.asarray(x), s))
+        assert np.allclose(_nlobe(jnp.asarray(x) + 2 * np.pi, s), _nlobe(jnp.asarray(x), s))
     assert np.isclose(float(chiang.azimuthal_scale(0.3)), np.sqrt(np.pi / 8) * (0.265 * .3 + 1.194 * .09 + 5.372 * .3 ** 22))
     v = chiang.longitudinal_variances(0.3)
     v0 = (0.726 * .3 + 0.812 * .09 + 3.7 * .3 ** 20) ** 2
@@ -90,13 +110,14 @@ def test_smooth_limit_lobes_match_m18(row):
     """Narrow lobes (beta_m, beta_n -> small, alpha = 0): A_p equal fiber.smooth_attenuation and the
     M18 table; the R/TT/TRT lobes peak at phi_o - phi_i = Phi(p, h) and theta_o = -theta_i."""
     h, ti_deg, phis, amps = row
-    p = chiang.Params(sigma_a=0.0, beta_m=0.02, beta_n=0.02, alpha=0.0)
+    # sigma_a = 0 in three bands (bands are compared below as band 0): the module's lobes program
+    p = chiang.Params(sigma_a=(0.0, 0.0, 0.0), beta_m=0.02, beta_n=0.02, alpha=0.0)
     ti = np.radians(ti_deg)
     phi = np.linspace(-np.pi, np.pi, 20001)
     wi = _dirs(np.full_like(phi, ti), np.zeros_like(phi))
     wo = _dirs(np.full_like(phi, -ti), phi)
-    A, M, N = (np.asarray(a) for a in chiang.lobes(p, wi, wo, h=h))
-    ref = np.asarray(fiber.smooth_attenuation(h, ti, 1.55, 0.0, p_max=3))
+    A, M, N = batched(chiang.lobes, p, wi, wo, h=h, axis=1)
+    ref = np.asarray(_smooth_attenuation(h, ti, 1.55, 0.0, p_max=3))
     assert np.allclose(A[:, 0, 0], ref[:, 0], rtol=1e-12)
     assert np.allclose(A[:3, 0, 0], amps, atol=6e-6)
     assert abs(A[:, 0, 0].sum() - 1) < 1e-12  # energy conserving lobe split
@@ -105,7 +126,7 @@ def test_smooth_limit_lobes_match_m18(row):
         assert abs((peak - phis[k] + 180) % 360 - 180) < 0.05, (k, peak, phis[k])
     # the longitudinal peak of every lobe sits on the specular cone theta_o = -theta_i
     to = np.linspace(-1.5, 1.5, 30001)
-    Mt = np.asarray(chiang.lobes(p, _dirs(np.full_like(to, ti), 0 * to), _dirs(to, 0 * to + 1.0), h=h)[1])
+    Mt = batched(chiang.lobes, p, _dirs(np.full_like(to, ti), 0 * to), _dirs(to, 0 * to + 1.0), h=h, axis=1)[1]
     assert np.all(np.abs(to[np.argmax(Mt, axis=1)] + ti) < 1e-3)  # up to ~v tan(theta)/2 off the cone
 
 
@@ -115,7 +136,7 @@ def test_tilt_shifts_lobes():
     a, ti = 0.05, 0.3
     p = chiang.Params(beta_m=0.02, alpha=a)
     to = np.linspace(-1.5, 1.5, 60001)
-    M = np.asarray(chiang.lobes(p, _dirs(np.full_like(to, ti), 0 * to), _dirs(to, 0 * to))[1])
+    M = batched(chiang.lobes, p, _dirs(np.full_like(to, ti), 0 * to), _dirs(to, 0 * to), axis=1)[1]
     peaks = to[np.argmax(M, axis=1)]
     assert np.allclose(peaks, [2 * a - ti, -a - ti, -4 * a - ti, -ti], atol=1e-3)
 
@@ -132,16 +153,23 @@ def test_direction_kernel_equals_angle_formulas():
     h = rng.uniform(-1, 1, n)
     for beta_m, alpha in ((0.3, 0.2), (0.03, -0.3), (0.9, 0.0)):
         p = chiang.Params(beta_m=beta_m, beta_n=0.25, alpha=alpha)
-        A, M, N = (np.asarray(a) for a in chiang.lobes(p, _dirs(ti, pi_), _dirs(to, po), h=h))
-        v = np.asarray(jnp.stack(chiang.longitudinal_variances(beta_m)))[:, None]
-        M_ref = np.asarray(chiang.longitudinal_lobe(chiang.tilted_angles(jnp.asarray(ti), alpha), to[None], v))
+        A, M, N = batched(chiang.lobes, p, _dirs(ti, pi_), _dirs(to, po), h=h, axis=1)
+        M_ref, N_ref, A_ref = (np.asarray(a) for a in _angle_form(p, *(jnp.asarray(a) for a in (ti, to, pi_, po, h))))
         assert np.allclose(M, M_ref, rtol=1e-9, atol=1e-12 * M_ref.max())
-        eta_p = fiber.bravais_eta(1.55, ti)
-        s = chiang.azimuthal_scale(0.25)
-        N_ref = [chiang.azimuthal_lobe(po - pi_ - fiber.exit_azimuth(k, h, eta_p), s) for k in range(3)]
-        assert np.allclose(N[:3], np.asarray(N_ref), rtol=1e-9, atol=1e-12)
-        assert np.allclose(A, np.asarray(fiber.smooth_attenuation(h, ti, 1.55, chiang.as_bands(p.sigma_a), 3)),
-                           rtol=1e-12)
+        assert np.allclose(N[:3], N_ref, rtol=1e-9, atol=1e-12)
+        assert np.allclose(A, A_ref, rtol=1e-12)
+
+
+@jax.jit
+def _angle_form(p, ti, to, pi_, po, h):
+    """M_p (tilted), N_p (R, TT, TRT) and A_p from the angle-form lobe functions (one compiled
+    program for the three parameter sets)."""
+    v = jnp.stack(chiang.longitudinal_variances(p.beta_m))[:, None]
+    M_ref = chiang.longitudinal_lobe(chiang.tilted_angles(ti, p.alpha), to[None], v)
+    eta_p = fiber.bravais_eta(p.eta, ti)
+    s = chiang.azimuthal_scale(p.beta_n)
+    N_ref = jnp.stack([chiang.azimuthal_lobe(po - pi_ - fiber.exit_azimuth(k, h, eta_p), s) for k in range(3)])
+    return M_ref, N_ref, fiber.smooth_attenuation(h, ti, p.eta, chiang.as_bands(p.sigma_a), 3)
 
 
 # ------------------------------------------------------------------------------------------
@@ -165,7 +193,7 @@ def test_absorbing_attenuations_match_flatland_and_closed_form(theta_i):
     n = h.size
     wi = _dirs(np.full(n, theta_i), np.zeros(n))
     wo = _dirs(np.full(n, -theta_i), np.full(n, 1.0))  # A_p depends on wi and h only
-    A = np.asarray(chiang.lobes(chiang.Params(eta=eta, sigma_a=tuple(sig), alpha=0.0), wi, wo, h=jnp.asarray(h))[0])
+    A = batched(chiang.lobes, chiang.Params(eta=eta, sigma_a=tuple(sig), alpha=0.0), wi, wo, h=h, axis=1)[0]
     np.testing.assert_allclose(A, ref, rtol=1e-9, atol=1e-14)
     s, c = np.sin(theta_i), np.cos(theta_i)
     cos_gt = np.sqrt(1.0 - (h * c / np.sqrt(eta ** 2 - s ** 2)) ** 2)[:, None]
@@ -191,23 +219,25 @@ def test_albedo_is_sum_of_attenuations(far):
     """Quadrature: int S cos(theta_o) dwo = sum_p A_p (= 1 with sigma_a = 0) and int pdf dwo = 1,
     near field at several (theta_i, h), far field = the h-average of sum_p A_p."""
     T, P, W = _sphere_quadrature(96, 192)
-    base = dict(beta_m=0.4, beta_n=0.5, far_field=far, n_h=16)
+    # n_h only for the far field (a static setting: near-field programs are the module's)
+    base = dict(beta_m=0.4, beta_n=0.5, far_field=far, **(dict(n_h=16) if far else {}))
     for ti, h in ((0.3, 0.2), (-1.2, -0.8), (0.0, 0.95)):
         wi = _dirs(np.full(T.shape, ti), np.full(T.shape, 0.4))
         wo = _dirs(T, P)
         cos_o = np.cos(T)[..., None]
-        S0 = np.asarray(chiang.eval(chiang.Params(sigma_a=0.0, **base), wi, wo, h=h))
+        # sigma_a = 0 in each of three bands
+        S0 = batched(chiang.eval, chiang.Params(sigma_a=(0.0, 0.0, 0.0), **base), wi, wo, h=h)
         a0 = np.sum(S0 * cos_o * W[..., None], axis=(0, 1))
         assert np.allclose(a0, 1.0, atol=1e-5), a0
         pr = chiang.Params(sigma_a=(0.2, 0.5, 1.5), **base)
-        S = np.asarray(chiang.eval(pr, wi, wo, h=h))
-        pdf = np.asarray(chiang.pdf(pr, wi, wo, h=h))
+        S = batched(chiang.eval, pr, wi, wo, h=h)
+        pdf = batched(chiang.pdf, pr, wi, wo, h=h)
         if far:
             x, w = gauss_legendre(16)
-            ref = np.sum(np.asarray(fiber.smooth_attenuation(jnp.asarray(x), ti, 1.55, jnp.asarray((0.2, 0.5, 1.5)),
-                                                            p_max=3)).sum(0) * w[:, None] / 2, axis=0)
+            ref = np.sum(np.asarray(_smooth_attenuation(jnp.asarray(x), ti, 1.55, jnp.asarray((0.2, 0.5, 1.5)),
+                                                        p_max=3)).sum(0) * w[:, None] / 2, axis=0)
         else:
-            ref = np.asarray(fiber.smooth_attenuation(h, ti, 1.55, jnp.asarray((0.2, 0.5, 1.5)), p_max=3)).sum(0)
+            ref = np.asarray(_smooth_attenuation(h, ti, 1.55, jnp.asarray((0.2, 0.5, 1.5)), p_max=3)).sum(0)
         assert np.allclose(np.sum(S * cos_o * W[..., None], axis=(0, 1)), ref, atol=1e-5)
         assert abs(np.sum(pdf * W) - 1) < 1e-5
 
@@ -216,13 +246,13 @@ def test_albedo_is_sum_of_attenuations(far):
 def test_white_sample_weights_are_exactly_one(far):
     """sigma_a = 0: A_p are the same in every band and the lobe probabilities equal A_p, and
     M_p, N_p are sampled exactly, so every weight S cos / pdf is 1 (to rounding)."""
-    n = 1024
+    n = BATCH  # one batch of the module's sampler programs
     key = jax.random.key(11)
     wi = testing.random_directions(key, n, "sphere")
-    p = chiang.Params(sigma_a=0.0, beta_m=0.2, beta_n=0.3, far_field=far, n_h=24)
+    # sigma_a = 0 in each of three bands; n_h as in the module's other far-field calls
+    p = chiang.Params(sigma_a=(0.0, 0.0, 0.0), beta_m=0.2, beta_n=0.3, far_field=far, n_h=16)
     h = jax.random.uniform(jax.random.key(12), (n,), minval=-1, maxval=1)
-    wo, w, pdf = chiang.sample(p, wi, jax.random.key(13), h=h)
-    w, pdf = np.asarray(w), np.asarray(pdf)
+    wo, w, pdf = batched(chiang.sample, p, wi, jax.random.key(13), h=h)
     assert np.all(pdf > 0)
     assert np.max(np.abs(w - 1.0)) < 1e-9
     # unit directions
@@ -246,23 +276,29 @@ def test_reciprocity_where_it_holds():
     theta_o = -theta_i (where A_p(theta_i) = A_p(theta_o)): S(wi, wo; h) = S(wo, wi; -h) near
     field, and S(wi, wo) = S(wo, wi) in the far field. Off the cone it fails (checked)."""
     rng = np.random.default_rng(3)
-    n = 256
+    n = BATCH
     ti = rng.uniform(-1.4, 1.4, n)
     pi_, po = rng.uniform(-np.pi, np.pi, (2, n))
     h = rng.uniform(-1, 1, n)
     wi, wo = _dirs(ti, pi_), _dirs(-ti, po)
     p = chiang.Params(alpha=0.0, beta_m=0.25, beta_n=0.35)
-    a = np.asarray(chiang.eval(p, wi, wo, h=h))
-    b = np.asarray(chiang.eval(p, wo, wi, h=-h))
+    a = batched(chiang.eval, p, wi, wo, h=h)
+    b = batched(chiang.eval, p, wo, wi, h=-h)
     assert np.allclose(a, b, rtol=1e-10, atol=0)
     pf = p.replace(far_field=True, n_h=16)
-    assert np.allclose(np.asarray(chiang.eval(pf, wi, wo)), np.asarray(chiang.eval(pf, wo, wi)), rtol=1e-10)
+    assert np.allclose(batched(chiang.eval, pf, wi, wo), batched(chiang.eval, pf, wo, wi), rtol=1e-10)
     # with the tilt, or off the specular cone, it does not hold
-    res = testing.check_reciprocity(MODEL, p, key=1, n=64)  # alpha = 0, h = 0, general pairs
+    # alpha = 0, h = 0, general pairs: as testing.reciprocity_pairs draws them (half uniform, half
+    # with wo from the sampler), with the module's sampler program
+    k1, k2, k3 = jax.random.split(jax.random.key(1), 3)
+    wi_g, wo_g = (testing.random_directions(k, BATCH, "sphere") for k in (k1, k2))
+    ws, _, pdf = batched(chiang.sample, p, wi_g, k3)
+    use = (np.arange(BATCH) % 2 == 1) & (pdf > 0)
+    wo_g = Vec3(*(np.where(use, a, np.asarray(b)) for a, b in zip(ws, wo_g)))
+    res = testing.check_reciprocity(MODEL, p, wi=wi_g, wo=wo_g)
     assert not res.passed and res.max_rel_error > 1e-2
     pt = p.replace(alpha=0.05)
-    assert not np.allclose(np.asarray(chiang.eval(pt, wi, wo, h=h)), np.asarray(chiang.eval(pt, wo, wi, h=-h)),
-                           rtol=1e-3)
+    assert not np.allclose(batched(chiang.eval, pt, wi, wo, h=h), batched(chiang.eval, pt, wo, wi, h=-h), rtol=1e-3)
 
 
 # ------------------------------------------------------------------------------------------
@@ -287,14 +323,15 @@ def test_sampling_consistency_and_chi2(name):
 
 
 def test_sampler_accepts_uniform_tuples_and_keys():
-    wi = _dirs(np.array([0.2, -0.5]), np.array([0.0, 1.0]))
+    # two directions, repeated to one batch of BATCH pairs (the program of test_mitsuba_hair's sampling test)
+    wi = _dirs(np.resize([0.2, -0.5], BATCH), np.resize([0.0, 1.0], BATCH))
     p = chiang.Params()
-    u = tuple(jnp.array([0.1, 0.9]) for _ in range(5))
-    wo1, w1, p1 = chiang.sample(p, wi, u)
-    wo2, w2, p2 = chiang.sample(p, wi, u)
-    assert np.allclose(np.asarray(w1), np.asarray(w2)) and np.all(np.asarray(p1) > 0)
+    u = tuple(jnp.asarray(np.resize([0.1, 0.9], BATCH)) for _ in range(5))
+    wo1, w1, p1 = batched(chiang.sample, p, wi, u)
+    wo2, w2, p2 = batched(chiang.sample, p, wi, u)
+    assert np.allclose(w1, w2) and np.all(p1 > 0)
     # pdf returned by sample == pdf(wi, wo)
-    assert np.allclose(np.asarray(p1), np.asarray(chiang.pdf(p, wi, wo1)))
+    assert np.allclose(p1, batched(chiang.pdf, p, wi, wo1))
     with pytest.raises(ValueError):
         chiang.sample(p, wi, u[:3])
 
@@ -324,19 +361,22 @@ def test_gradients_vs_finite_differences():
 
 
 def test_grazing_and_degenerate_inputs_are_finite():
+    """eval, pdf and sample (near and far field) stay finite along the fiber axis, at grazing
+    incidence and at |h| = 1 (the five pairs are repeated to one batch of BATCH pairs)."""
     p = chiang.Params()
     ax = jnp.array([1.0, -1.0, 0.0, 0.0, 1.0])
     wi = Vec3(ax, jnp.array([0.0, 0.0, 1.0, 0.0, 0.0]), jnp.array([0.0, 0.0, 0.0, 1.0, 0.0]))
     wo = Vec3(jnp.array([-1.0, 1.0, 1.0, 0.0, 0.6]), jnp.array([0.0, 0.0, 0.0, -1.0, 0.8]), jnp.zeros(5))
     for hh in (jnp.array([0.0, 1.0, -1.0, 1.0, 0.5]),):
-        for pp in (p, p.replace(far_field=True, n_h=4)):
-            f = np.asarray(chiang.eval(pp, wi, wo, h=hh))
+        for pp in (p, p.replace(far_field=True, n_h=16)):
+            f = batched(chiang.eval, pp, wi, wo, h=hh)
             assert np.all(np.isfinite(f)) and np.all(f >= 0)
-            assert np.all(np.isfinite(np.asarray(chiang.pdf(pp, wi, wo, h=hh))))
-            _, w, pdf = chiang.sample(pp, wi, jax.random.key(0), h=hh)
-            assert np.all(np.isfinite(np.asarray(w))) and np.all(np.isfinite(np.asarray(pdf)))
-    # theta_o = +-pi/2 exactly: S (which carries 1/cos theta_o) is set to 0 there
-    assert np.all(np.asarray(chiang.eval(p, wi, wo))[:2] == 0)
+            assert np.all(np.isfinite(batched(chiang.pdf, pp, wi, wo, h=hh)))
+            _, w, pdf = batched(chiang.sample, pp, wi, jax.random.key(0), h=hh)
+            assert np.all(np.isfinite(w)) and np.all(np.isfinite(pdf))
+    # theta_o = +-pi/2 exactly: S (which carries 1/cos theta_o) is set to 0 there (at h = 0, the
+    # default; in the fixed-size chunks of testing.call_chunked, as check_reciprocity calls eval)
+    assert np.all(testing.call_chunked(chiang.eval, p, wi, wo)[:2] == 0)
     g = jax.jit(jax.jacfwd(lambda b: jnp.sum(chiang.eval.kernel(p.replace(beta_m=b), wi, wo, hh))))(0.3)
     assert np.isfinite(float(g))
 

@@ -47,13 +47,28 @@ def test_h1_closed_form_ggx_azimuthal_integral(beta, theta_h, alpha):
         assert abs(float(P4(u_lo) - P4(u_hi)) - ref) < 1e-6 * abs(ref)
 
 
+@functools.lru_cache(maxsize=None)
+def _gauss_legendre_nodes(n):
+    return gauss_legendre(n)
+
+
+def _gauss_legendre(n, a, b):
+    """gauss_legendre(n, a, b), the rule on [-1, 1] computed once per n (an eigenvalue problem)."""
+    x, w = _gauss_legendre_nodes(n)
+    half = 0.5 * (b - a)
+    return half * x + 0.5 * (a + b), half * w
+
+
 def _albedo_r(p, thi, n_in=240, n_out=60, n_phi=256, fn=None):
     """int S_R cos(theta_o) dw_o with a graded rule in theta_o (GGX tails reach far); ``fn``
-    replaces huang.eval_r."""
+    replaces huang.eval_r. The theta_o nodes of empty parts (lobe against a pole) are padded
+    with weight-0 nodes to n_in + 2 n_out: one grid shape, one compiled program per ``fn``."""
     c, w = -thi, 10 * float(p.roughness)
     parts = [(-np.pi / 2, max(c - w, -np.pi / 2), n_out), (max(c - w, -np.pi / 2), min(c + w, np.pi / 2), n_in),
              (min(c + w, np.pi / 2), np.pi / 2, n_out)]
-    t, wt = map(np.concatenate, zip(*[gauss_legendre(n, a, b) for a, b, n in parts if b > a]))
+    t, wt = map(np.concatenate, zip(*[_gauss_legendre(n, a, b) for a, b, n in parts if b > a]))
+    pad = n_in + 2 * n_out - t.size
+    t, wt = np.concatenate([t, np.zeros(pad)]), np.concatenate([wt, np.zeros(pad)])
     ph = (np.arange(n_phi) + 0.5) / n_phi * 2 * np.pi - np.pi
     T, P = np.meshgrid(t, ph, indexing="ij")
     S = np.asarray((fn or huang.eval_r)(p, fiber_direction(thi, 0.0), fiber_direction(jnp.asarray(T), jnp.asarray(P))))
@@ -111,16 +126,31 @@ def _flat(beta, alpha, e, sa, dist="ggx"):
 DIRS = [(-0.3, 0.5), (-0.2, 2.0), (-0.35, -2.9), (-0.3, 3.0), (-0.5, -1.2), (0.1, 2.6)]
 
 
+N_R = 64  # directions per eval_r call of the R-lobe tests: one compiled program per distribution
+
+
+def _eval_r_at(p, wi, th, ph):
+    """huang.eval_r at wi (one direction) and wo = (th, ph) (1D, at most N_R of them), both
+    repeated to N_R pairs: the shapes of test_h6_reciprocity_and_h7_symmetry_of_r."""
+    n = len(th)
+    th, ph = (np.resize(np.asarray(a, dtype=float), N_R) for a in (th, ph))
+    wi = Vec3(*(jnp.full(N_R, float(c), jnp.float64) for c in wi))
+    return np.asarray(huang.eval_r(p, wi, fiber_direction(jnp.asarray(th), jnp.asarray(ph))))[:n]
+
+
 @pytest.mark.parametrize("e,alpha,dist", [(0.0, 0.0, "ggx"), (0.0, 3 * DEG, "ggx"), (0.5, -3 * DEG, "ggx"),
                                           (0.5, 3 * DEG, "beckmann")])
 def test_r_lobe_matches_flatland_pointwise(e, alpha, dist):
     beta = 0.2
-    p = huang.Params(roughness=beta, tilt=alpha, eta=1.55, sigma_a=0.0, eccentricity=e, distribution=dist)
+    # sigma_a in three bands (the R lobe has no absorption) and N_R pairs: the program of
+    # test_h6_reciprocity_and_h7_symmetry_of_r for the GGX cases
+    p = huang.Params(roughness=beta, tilt=alpha, eta=1.55, sigma_a=(0.0, 0.0, 0.0), eccentricity=e,
+                     distribution=dist)
     sec = _flat(beta, alpha, e, 0.0, dist)
     wi = fiber_direction(0.3, 0.4)
-    for th, ph in DIRS:
+    vs = _eval_r_at(p, wi, [d[0] for d in DIRS], [d[1] for d in DIRS]) * np.cos(0.3)
+    for (th, ph), v in zip(DIRS, vs):
         wo = fiber_direction(th, ph)
-        v = float(huang.eval_r(p, wi, wo)) * np.cos(0.3)
         r, se = fl.nee_bcsdf(sec, wi, wo, KEY, 2 ** 12, n_lobes=4, max_events=1)
         assert abs(v - float(r[0, 0])) < 4 * float(se[0, 0]) + 1e-12, (th, ph, v, float(r[0, 0]))
 
@@ -128,8 +158,8 @@ def test_r_lobe_matches_flatland_pointwise(e, alpha, dist):
 def test_h6_reciprocity_and_h7_symmetry_of_r():
     """H-6: D_o S_R(i, o) = D_i S_R(o, i) (ellipse, tilt) exactly; circle: S(i, o) = S(o, i)."""
     rng = np.random.default_rng(0)
-    th = rng.uniform(-1.3, 1.3, (2, 64))
-    ph = rng.uniform(-np.pi, np.pi, (2, 64))
+    th = rng.uniform(-1.3, 1.3, (2, N_R))
+    ph = rng.uniform(-np.pi, np.pi, (2, N_R))
     wi, wo = fiber_direction(th[0], ph[0]), fiber_direction(th[1], ph[1])
     for e in (0.0, 0.7):
         p = huang.Params(roughness=0.15, tilt=4 * DEG, eccentricity=e)
@@ -143,11 +173,27 @@ def test_h6_reciprocity_and_h7_symmetry_of_r():
     np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=1e-12)
 
 
+N_PATHS = 256  # internal paths per Simpson node of the estimator in the TT/TRT tests
+
+
+def _eval_lobes_at(p, wi, wo, key):
+    """huang.eval_lobes at wi = (theta, phi) and wo = (theta, phi) or a list of len(DIRS) of them
+    (a single wo repeated to len(DIRS); the uniforms are common to all directions, so the copies
+    are equal): one compiled program for the TT/TRT tests. Returns numpy (value, stderr) with the
+    wo axis dropped for a single wo."""
+    single = np.ndim(wo) == 1
+    th, ph = np.asarray(wo if not single else [wo] * len(DIRS), dtype=float).T
+    v, se = huang.eval_lobes(p, fiber_direction(*wi), fiber_direction(jnp.asarray(th), jnp.asarray(ph)), key=key)
+    v, se = np.asarray(v), np.asarray(se)
+    return (v[:, 0], se[:, 0]) if single else (v, se)
+
+
 def test_h8_ellipse_tends_to_circle():
-    wi, wo = fiber_direction(0.3, 0.4), fiber_direction(-0.2, 2.2)
-    a, sa = huang.eval_lobes(huang.Params(eccentricity=0.0), wi, wo)
-    b, sb = huang.eval_lobes(huang.Params(eccentricity=1e-4), wi, wo)
-    np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-6, atol=1e-10)
+    # common random numbers (one key), the estimator's settings of test_tt_trt_match_flatland (one
+    # compiled eval_lobes program, _eval_lobes_at)
+    a, sa = _eval_lobes_at(huang.Params(eccentricity=0.0, n_paths=N_PATHS), (0.3, 0.4), (-0.2, 2.2), KEY)
+    b, sb = _eval_lobes_at(huang.Params(eccentricity=1e-4, n_paths=N_PATHS), (0.3, 0.4), (-0.2, 2.2), KEY)
+    np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-10)
 
 
 def test_h9_tilt_law_and_h10_unreachable_forward_direction():
@@ -171,18 +217,19 @@ def test_h9_tilt_law_and_h10_unreachable_forward_direction():
 def test_tt_trt_match_flatland(beta, alpha, e, sa):
     """Spec §4.4: per-lobe S cos th_i of the MC-Simpson estimator vs the flatland NEE reference."""
     # the NEE reference of TRT is heavy-tailed at low roughness: more paths there
-    _compare_tt_trt(beta, alpha, e, sa, thetas=(0.3,), n_ref=2 ** 13 if beta > 0.15 else 2 ** 15, n_paths=64)
+    _compare_tt_trt(beta, alpha, e, sa, thetas=(0.3,), n_ref=2 ** 13 if beta > 0.15 else 2 ** 15, n_paths=N_PATHS)
 
 
 def _compare_tt_trt(beta, alpha, e, sa, thetas, n_ref, n_paths, dirs=DIRS):
-    p = huang.Params(roughness=beta, tilt=alpha, eta=1.55, sigma_a=sa, eccentricity=e, n_paths=n_paths)
+    # sigma_a in three bands (band 0 is compared with the one-band tracer): the program of the
+    # other eval_lobes tests
+    p = huang.Params(roughness=beta, tilt=alpha, eta=1.55, sigma_a=(sa,) * 3, eccentricity=e, n_paths=n_paths)
     sec = _flat(beta, alpha, e, sa)
     out = {}
     for thi in thetas:
         wi = fiber_direction(thi, 0.4)
-        wo = fiber_direction(jnp.asarray([d[0] for d in dirs]), jnp.asarray([d[1] for d in dirs]))
-        v, se = huang.eval_lobes(p, wi, wo, key=KEY)
-        v, se = np.asarray(v[..., 0]) * np.cos(thi), np.asarray(se[..., 0]) * np.cos(thi)
+        v, se = _eval_lobes_at(p, (thi, 0.4), dirs, KEY)
+        v, se = v[..., 0] * np.cos(thi), se[..., 0] * np.cos(thi)
         ref, rse = [], []
         for k, (th, ph) in enumerate(dirs):
             r, s = fl.nee_bcsdf(sec, wi, fiber_direction(th, ph), jax.random.fold_in(KEY, k), n_ref, n_lobes=4,
@@ -215,10 +262,9 @@ def test_tt_trt_protocol_grid(beta, alpha, e, sa):
 
 
 def test_h6_reciprocity_of_tt_trt_within_noise():
-    p = huang.Params(roughness=0.2, tilt=3 * DEG, eccentricity=0.5, sigma_a=0.3, n_paths=256)
-    wi, wo = fiber_direction(0.3, 0.4), fiber_direction(-0.2, 2.8)
-    a, sa = huang.eval_lobes(p, wi, wo, key=KEY)
-    b, sb = huang.eval_lobes(p, wo, wi, key=jax.random.fold_in(KEY, 1))
+    p = huang.Params(roughness=0.2, tilt=3 * DEG, eccentricity=0.5, sigma_a=(0.3,) * 3, n_paths=N_PATHS)
+    a, sa = _eval_lobes_at(p, (0.3, 0.4), (-0.2, 2.8), KEY)
+    b, sb = _eval_lobes_at(p, (-0.2, 2.8), (0.3, 0.4), jax.random.fold_in(KEY, 1))
     Di, Do = np.sqrt(1 - 0.25 * np.sin(0.4) ** 2), np.sqrt(1 - 0.25 * np.sin(2.8) ** 2)
     for lobe in (1, 2):
         x, y = float(a[lobe, 0]) * Do, float(b[lobe, 0]) * Di

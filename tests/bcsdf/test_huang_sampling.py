@@ -160,8 +160,9 @@ def test_lobe_attenuations_probabilities_and_weights():
     np.testing.assert_allclose(np.asarray(w)[g], (Ak * (Vk / Pk)[:, None])[g], rtol=1e-10)
     # one fixed path (h = 0.3), stratified lobe uniforms: the frequencies are P_p to 1/N
     p2 = huang.Params(roughness=0.3, tilt=3 * DEG, sigma_a=_SIGMA, **_STATIC)
-    u = [jnp.full(N, 0.1) for _ in range(huang_sampling._n_uniforms(p2))]
-    u[0] = jnp.full(N, 0.65)
+    # float64, not weakly typed (jnp.full's default): the argument types of the other sampler runs
+    u = [jnp.full(N, 0.1, jnp.float64) for _ in range(huang_sampling._n_uniforms(p2))]
+    u[0] = jnp.full(N, 0.65, jnp.float64)
     u[1] = jnp.asarray((np.arange(N) + 0.5) / N)
     _, w, lobe, P, A, Vis, good = _sample_path(p2, _wi(), tuple(u))
     freq = np.bincount(np.asarray(lobe), minlength=3) / N

@@ -16,8 +16,12 @@ from appearance_jax.bcsdf import sadeghi as S
 from appearance_jax.core.frame import fiber_direction
 
 DEG = math.pi / 180
+# the model functions as compiled programs (parameters are arguments: one program per shape and
+# static setting; op by op, every primitive compiles separately)
 _mlobes = jax.jit(M.lobes)
 _slobes = jax.jit(S.lobes)
+_sazimuthal = jax.jit(S.azimuthal)
+_slongitudinal = jax.jit(S.longitudinal)
 
 
 def test_h1_analytic_global_azimuthal():
@@ -28,12 +32,12 @@ def test_h1_analytic_global_azimuthal():
         np.testing.assert_allclose(float(DS.azimuthal_global(S.Params(gamma_tt=g * DEG))[1]), ref, atol=1e-7)
     # int_{-pi}^{pi} cos(phi/2) dphi = 4, and N^G (with glints) vs midpoint quadrature of N'
     phi = -np.pi + (np.arange(200000) + 0.5) * (2 * np.pi / 200000)
-    n = np.asarray(S.azimuthal(S.Params(), jnp.asarray(phi)))
+    n = np.asarray(_sazimuthal(S.Params(), jnp.asarray(phi)))
     np.testing.assert_allclose(n[0].sum() * 2 * np.pi / 200000, 4.0, atol=1e-8)
     front = phi >= np.pi / 2
     num = n[:, front].sum(1) * (2 * np.pi / 200000) * 2 / np.pi
     np.testing.assert_allclose(np.asarray(DS.azimuthal_global(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG))),
-                               np.asarray(S.azimuthal(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG),
+                               np.asarray(_sazimuthal(S.Params(glint_angle=80 * DEG, glint_width=10 * DEG),
                                                       jnp.asarray(phi[front]))).mean(1) * 1.0, atol=1e-6)
     np.testing.assert_allclose(np.asarray(DS.azimuthal_global(S.Params())), num, atol=1e-8)
 
@@ -47,25 +51,25 @@ def _grid(n=9):
 def test_h2_decoupling_invariants():
     th = jnp.linspace(-1.5, 1.5, 301)
     for b in (0.02, 0.1, 0.5):
-        m = np.asarray(S.longitudinal(S.Params(beta_r=b, beta_tt=b, beta_trt=b), th))
+        m = np.asarray(_slongitudinal(S.Params(beta_r=b, beta_tt=b, beta_trt=b), th))
         assert np.all(m <= 1.0)
-        m0 = S.longitudinal(S.Params(beta_r=b, beta_tt=b, beta_trt=b), jnp.asarray([-5 * DEG, 2.5 * DEG, 7.5 * DEG]))
+        m0 = _slongitudinal(S.Params(beta_r=b, beta_tt=b, beta_trt=b), jnp.asarray([-5 * DEG, 2.5 * DEG, 7.5 * DEG]))
         np.testing.assert_allclose(np.diag(np.asarray(m0)), 1.0, atol=1e-15)
     ti, to, ph = _grid()
-    base = np.asarray(S.lobes(S.Params(), ti, to, ph))
+    base = np.asarray(_slobes(S.Params(), ti, to, ph))
     # beta_X leaves f'_X unchanged at theta_h = alpha_X (theta_i = theta_o = alpha_X)
     a = jnp.full(5, -5 * DEG)
     phs = jnp.linspace(0, 3, 5)
-    np.testing.assert_allclose(S.lobes(S.Params(beta_r=0.3), a, a, phs)[0], S.lobes(S.Params(), a, a, phs)[0],
+    np.testing.assert_allclose(_slobes(S.Params(beta_r=0.3), a, a, phs)[0], _slobes(S.Params(), a, a, phs)[0],
                                rtol=1e-14)
     # C_X / I_X change only their own component
     for k, kw in enumerate([dict(color_r=(0.1, 2.0, 0.3)), dict(intensity_tt=3.0), dict(color_trt=(1, 1, 1))]):
-        new = np.asarray(S.lobes(S.Params(**kw), ti, to, ph))
+        new = np.asarray(_slobes(S.Params(**kw), ti, to, ph))
         others = [j for j in range(3) if j != k]
         np.testing.assert_array_equal(new[others], base[others])
         assert not np.allclose(new[k], base[k])
     # I_g = 0: N'_TRT = N'_R
-    n = np.asarray(S.azimuthal(S.Params(glint_intensity=0.0), ph))
+    n = np.asarray(_sazimuthal(S.Params(glint_intensity=0.0), ph))
     np.testing.assert_array_equal(n[2], n[0])
 
 
@@ -73,16 +77,16 @@ def test_h7_peak_positions_and_shifts():
     G = 40 * DEG
     p = S.Params(glint_angle=G, glint_intensity=3.0, gamma_tt=0.3)
     phi = jnp.linspace(-np.pi, np.pi, 7201)
-    n = np.asarray(S.azimuthal(p, phi))
+    n = np.asarray(_sazimuthal(p, phi))
     glint = n[2] - np.cos(np.abs(np.asarray(phi)) / 2)
     assert abs(abs(float(phi[np.argmax(glint)])) - G) < 1e-3
     np.testing.assert_allclose(glint, glint[::-1], atol=1e-12)    # two glints, +-G
     assert abs(abs(float(phi[np.argmax(n[1])])) - np.pi) < 1e-3  # TT at phi = pi
     assert abs(float(phi[np.argmax(n[0])])) < 1e-3               # R at phi = 0
-    assert abs(float(phi[np.argmax(S.azimuthal(p.replace(glint_intensity=0.0), phi)[2])])) < 1e-3
+    assert abs(float(phi[np.argmax(_sazimuthal(p.replace(glint_intensity=0.0), phi)[2])])) < 1e-3
     # R toward the root (theta_h peak at alpha_R < 0), TRT toward the tip
     th = jnp.linspace(-0.5, 0.5, 10001)
-    m = np.asarray(S.longitudinal(S.Params(), th))
+    m = np.asarray(_slongitudinal(S.Params(), th))
     peaks = np.asarray(th)[m.argmax(1)]
     assert peaks[0] < 0 < peaks[2] and abs(peaks[0] + 5 * DEG) < 1e-4
     # G_angle per strand in [30, 45] deg
@@ -96,8 +100,7 @@ def _brute_albedo(p, theta_i, n_t=400, n_p=800):
     to = -np.pi / 2 + (np.arange(n_t) + 0.5) * np.pi / n_t
     ph = -np.pi + (np.arange(n_p) + 0.5) * 2 * np.pi / n_p
     T, P = np.meshgrid(to, ph, indexing="ij")
-    f = np.asarray(jax.jit(lambda a, b, c: S.lobes(p, a, b, c))(jnp.full(T.shape, theta_i), jnp.asarray(T),
-                                                                jnp.asarray(P)))
+    f = np.asarray(_slobes(p, jnp.full(T.shape, theta_i, jnp.float64), jnp.asarray(T), jnp.asarray(P)))
     w = (np.cos(T) ** 2 * (np.pi / n_t) * (2 * np.pi / n_p))[None, :, :, None]
     back = np.abs(P) < np.pi / 2
     fb = (f * w * back[None, :, :, None]).sum((1, 2))
@@ -105,10 +108,21 @@ def _brute_albedo(p, theta_i, n_t=400, n_p=800):
     return fb, ff  # per lobe, per band
 
 
+N_TAB = 4  # inclinations per DS.tables call of this module (one compiled program per static setting)
+
+
+def _tables(p, d, theta):
+    """DS.tables at ``theta`` (1D, at most N_TAB), padded with copies of the first to N_TAB."""
+    theta = jnp.asarray(theta, dtype=jnp.float64)
+    n = theta.shape[0]
+    tab = DS.tables(p, d, jnp.concatenate([theta, jnp.full(N_TAB - n, theta[0])]))
+    return DS.Tables(*(v[:n] for v in tab))
+
+
 @pytest.fixture(scope="module")
 def tabs():
     th = jnp.asarray([-0.7, 0.0, 0.4, 1.1])
-    return th, DS.tables(S.Params(), DS.DualParams(), th)
+    return th, _tables(S.Params(), DS.DualParams(), th)
 
 
 def test_h4_normalization_and_tables_vs_brute_force(tabs):
@@ -130,7 +144,7 @@ def test_h4_normalization_and_tables_vs_brute_force(tabs):
     np.testing.assert_allclose((fb + ff).sum(0), 4 * (fb1 + ff1).sum(0), rtol=1e-12)
     assert np.all((fb + ff).sum(0) > 1.0)
     # ... but the normalized f_s'^norm feeding dual scattering neither vanishes nor blows up
-    t4 = DS.tables(S.Params(intensity_r=4, intensity_tt=4, intensity_trt=4), DS.DualParams(), th[:1])
+    t4 = _tables(S.Params(intensity_r=4, intensity_tt=4, intensity_trt=4), DS.DualParams(), th[:1])
     np.testing.assert_allclose(np.asarray(t4.a_f + t4.a_b), 1.0, atol=1e-12)
     np.testing.assert_allclose(np.asarray(t4.a_f), np.asarray(tab.a_f[:1]), atol=1e-12)
 
@@ -170,7 +184,7 @@ def test_h3_h6_dual_scattering_limits():
     traw = DS.dual_scattering_terms(p, DS.DualParams(clamp="raw"), wi, wo, 0.0, 1.0)
     assert np.all(np.asarray(traw.F_scatter) < 0)
     # T_f decreases, sigma_f^2 grows linearly with n
-    ns = jnp.asarray([0.0, 1.0, 2.0, 5.0, 10.0])
+    ns = [0.0, 1.0, 2.0, 5.0, 10.0]  # python numbers, as in the other calls: one compiled program
     Ts, s2 = [], []
     for n in ns:
         t = DS.dual_scattering_terms(p, d, wi, wo, n, 0.3)
@@ -180,7 +194,7 @@ def test_h3_h6_dual_scattering_limits():
     assert np.all(np.diff(Ts, axis=0) < 0)
     np.testing.assert_allclose(s2, np.asarray(ns)[:, None, None] * s2[1][None], rtol=1e-12)
     # H3: adjusters at their defaults reproduce the unadjusted formulas
-    tab = DS.tables(p, d, jnp.arcsin(wi.x))
+    tab = _tables(p, d, jnp.arcsin(wi.x))
     th_h = 0.5 * (jnp.arcsin(wi.x) + jnp.arcsin(wo.x))
     th_d = 0.5 * (jnp.arcsin(wo.x) - jnp.arcsin(wi.x))
     t = DS.dual_scattering_terms(p, d, wi, wo, 3.0, 0.4)
@@ -199,7 +213,7 @@ def test_h3_h6_dual_scattering_limits():
 
 
 def test_forward_inclinations_and_precomputed_tables():
-    p, d = S.Params(), DS.DualParams(n_quad=32)
+    p, d = S.Params(), DS.DualParams()  # the settings of the other dual-scattering tests
     wi, wo = _dirs()
     th_i = jnp.arcsin(wi.x)
     # n hairs with the shading hair's inclination == scalar n (Eqs. 4.23-4.24)
@@ -251,14 +265,16 @@ def test_dual_gradients_and_finite():
         p = S.Params(beta_r=x[0], gamma_tt=x[1], intensity_tt=x[2])
         return jnp.sum(DS._dual_kernel(p, d, wi, wo, 3.0, 0.3))
 
-    # grad_fn: the reverse-mode derivative as one compiled program (grad of the jitted f compiles
-    # its forward and backward passes separately)
-    testing.assert_gradients(jax.jit(f), jnp.asarray([0.15, 0.5, 1.2]), rtol=1e-5, atol=1e-9, elementwise=True,
-                             name="dual scattering", grad_fn=jax.jit(jax.grad(f)))
-    # axis-aligned / grazing directions stay finite
+    # values and the reverse-mode derivative from one compiled value_and_grad (grad of the jitted f
+    # compiles its forward and backward passes separately, and jit(f) a third program); the
+    # finite differences difference its values
+    vg = jax.jit(jax.value_and_grad(f))
+    testing.assert_gradients(lambda x: vg(x)[0], jnp.asarray([0.15, 0.5, 1.2]), rtol=1e-5, atol=1e-9,
+                             elementwise=True, name="dual scattering", grad_fn=lambda x: vg(x)[1])
+    # axis-aligned / grazing directions stay finite (with the DualParams of the other tests)
     wa = fiber_direction(jnp.asarray([np.pi / 2, -np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, 0.0]))
     wb = fiber_direction(jnp.asarray([-np.pi / 2, np.pi / 2, 0.0]), jnp.asarray([0.0, 0.0, np.pi]))
-    assert np.all(np.isfinite(np.asarray(DS.dual_scattering(S.Params(), d, wa, wb, 2.0, 0.5))))
+    assert np.all(np.isfinite(np.asarray(DS.dual_scattering(S.Params(), DS.DualParams(), wa, wb, 2.0, 0.5))))
     assert np.all(np.isfinite(np.asarray(S.eval(S.Params(), wa, wb))))
 
 

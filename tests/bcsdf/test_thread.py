@@ -14,6 +14,9 @@ from appearance_jax.core.vec import Vec3, cross, normalize
 from appearance_jax.optics.fresnel import fresnel_dielectric
 
 D = math.pi / 180.0
+# compiled once per shape (op by op, each primitive of them compiles separately)
+_fresnel = jax.jit(lambda c, eta: fresnel_dielectric(c, eta)[0])
+_gaussian = jax.jit(thread.gaussian)
 
 LINEN = thread.linen()
 POLY_FLAT = thread.Params(eta=1.539, albedo=tuple(0.035 * np.array([1.0, 0.37, 0.30])), k_d=0.1, gamma_s=2.5,
@@ -46,7 +49,7 @@ def test_k2_linen_surface_term():
 def test_gamma_is_in_degrees_and_gaussian_unit_area():
     # D-C3: g(gamma, 0) = 1 / (sqrt(2 pi) gamma_rad), and g integrates to 1 over radians
     x = np.linspace(-2.0, 2.0, 4001)
-    g = np.asarray(thread.gaussian(12.0 * D, x))
+    g = np.asarray(_gaussian(12.0 * D, x))
     assert g[2000] == pytest.approx(1.0 / (math.sqrt(2 * math.pi) * 12.0 * D), rel=1e-12)
     assert np.trapezoid(g, x) == pytest.approx(1.0, rel=1e-8)
 
@@ -59,19 +62,19 @@ def test_k3_structure():
     for ti in (10.0, 30.0, 50.0):
         fs = np.asarray(thread.surface_term(POLY_FLAT, ti * D, tr, 0.0))
         assert abs(tr[np.argmax(fs)] / D + ti) < 0.5
-        F = np.asarray(fresnel_dielectric(jnp.asarray(np.cos((ti * D - tr) / 2)), 1.539)[0])
+        F = np.asarray(_fresnel(jnp.asarray(np.cos((ti * D - tr) / 2)), 1.539))
         assert abs(tr[np.argmax(fs / F)] / D + ti) < 0.051
     # f_rs / (F_r(eq 5.8 angle) cos(phi_d / 2)) = g(gamma_s, theta_h), independent of phi_d
     phi = np.linspace(-3.0, 3.0, 13)
     fs = np.asarray(thread.surface_term(p, 40 * D, -20 * D, phi))
     c58 = math.cos(30 * D) * np.cos(phi / 2)
-    F = np.asarray(fresnel_dielectric(jnp.asarray(c58), 1.46)[0])
+    F = np.asarray(_fresnel(jnp.asarray(c58), 1.46))
     ratio = fs / (F * np.cos(phi / 2))
-    np.testing.assert_allclose(ratio, float(thread.gaussian(12 * D, 10 * D)), rtol=1e-10)
+    np.testing.assert_allclose(ratio, float(_gaussian(12 * D, 10 * D)), rtol=1e-10)
     # k_d = 1: f_rv = F A / (cos ti + cos tr)
     ti, trr = 40 * D, -10 * D
     q = p.replace(k_d=1.0)
-    F2 = (1 - fresnel_dielectric(math.cos(ti), 1.46)[0]) * (1 - fresnel_dielectric(math.cos(trr), 1.46)[0])
+    F2 = (1 - _fresnel(math.cos(ti), 1.46)) * (1 - _fresnel(math.cos(trr), 1.46))
     want = float(F2) / (math.cos(ti) + math.cos(trr)) * np.asarray(q.albedo)
     np.testing.assert_allclose(np.asarray(thread.volume_term(q, ti, trr, 0.7)), want, rtol=1e-10)
     # k_d = 0: the volume lobe is a Gaussian of std gamma_v in theta_h (times the smooth F / (cos + cos))
@@ -80,10 +83,9 @@ def test_k3_structure():
     ti = 20 * D + th_h
     trr = -20 * D + th_h  # theta_i + theta_r = 2 theta_h, fixed difference
     v = np.asarray(thread.volume_term(q, ti, trr, 0.0))[:, 1]
-    F2 = np.array([(1 - fresnel_dielectric(math.cos(a), 1.46)[0]) * (1 - fresnel_dielectric(math.cos(b), 1.46)[0])
-                   for a, b in zip(ti, trr)])
+    F2 = np.array([(1 - _fresnel(math.cos(a), 1.46)) * (1 - _fresnel(math.cos(b), 1.46)) for a, b in zip(ti, trr)])
     lobe = v * (np.cos(ti) + np.cos(trr)) / F2 / float(np.asarray(q.albedo)[1])
-    np.testing.assert_allclose(lobe, np.asarray(thread.gaussian(24 * D, th_h)), rtol=1e-10)
+    np.testing.assert_allclose(lobe, np.asarray(_gaussian(24 * D, th_h)), rtol=1e-10)
 
 
 def _random_frame_dirs(key, n):
@@ -168,7 +170,7 @@ def test_registered_model_is_the_thread_in_the_fiber_frame():
 
     m = registry.get("cloth_thread")
     assert m is thread.MODEL and m.kind == "bcsdf" and m.reciprocal
-    _, _, _, wi, wo = _random_frame_dirs(2, 64)
+    _, _, _, wi, wo = _random_frame_dirs(2, 256)  # the size of test_reciprocity's draws (same op programs)
     th_i, ph_i = (np.asarray(a) for a in fiber_angles(wi))
     th_r, ph_r = (np.asarray(a) for a in fiber_angles(wo))
     a = np.asarray(m.eval(POLY_TWISTED, wi, wo))

@@ -109,6 +109,11 @@ def test_eval_pdf_sample_match_mitsuba(cfg):
     assert out["eval_uncorrected"][0] < 1e-2 and out["pdf_uncorrected"][0] < 1e-2
 
 
+def _repeat(a):
+    """``a`` (n, ...) repeated along its first axis to N_PAIRS rows (n <= N_PAIRS)."""
+    return np.resize(a, (N_PAIRS,) + a.shape[1:])
+
+
 @pytest.mark.parametrize("cfg", CONFIGS[:3], ids=[c[0] for c in CONFIGS[:3]])
 def test_sampling_matches_mitsuba(cfg):
     """Same uniforms -> same directions; at Mitsuba's samples, our pdf and weight equal its."""
@@ -133,7 +138,9 @@ def test_sampling_matches_mitsuba(cfg):
         p_mi[j] = bs.pdf
         w_mi[j] = np.array(w)
     wo32 = wo_mi.astype(np.float32)
-    f, pdf, f_corr, pdf_corr, A = hair_ours(params, wi, wo32)
+    # ours on the n pairs repeated to N_PAIRS: the compiled programs of the eval test (one shape)
+    f, pdf, f_corr, pdf_corr, A = hair_ours(params, _repeat(wi), _repeat(wo32))
+    f, pdf, f_corr, pdf_corr, A = f[:n], pdf[:n], f_corr[:n], pdf_corr[:n], A[:, :n]
     ok = p_mi > 0
     assert ok.mean() > 0.99
     rel_pdf = np.abs(pdf_corr[ok] - p_mi[ok]) / p_mi[ok]
@@ -149,10 +156,11 @@ def test_sampling_matches_mitsuba(cfg):
     lobe = np.sum(u0[None] >= C[:3], axis=0)
     lo = np.where(lobe > 0, np.take_along_axis(C, np.maximum(lobe - 1, 0)[None], 0)[0], 0.0)
     u_phi = (u0 - lo) / np.take_along_axis(P, lobe[None], 0)[0]
-    Wi = Vec3(*(jnp.asarray(c, dtype=jnp.float64) for c in wi.T))
     uu = (u0, u[:, 1].astype(float), u[:, 2].astype(float), np.clip(u_phi, 0, 1 - 1e-12), np.zeros(n))
-    ws, _, _ = chiang.sample(params, Wi, tuple(jnp.asarray(a) for a in uu), h=jnp.asarray(mitsuba_offset(wi)))
-    ws = np.stack([np.asarray(c) for c in ws], axis=1)
+    Wi = Vec3(*(jnp.asarray(_repeat(c)) for c in wi.T.astype(np.float64)))  # N_PAIRS, as above
+    ws, _, _ = chiang.sample(params, Wi, tuple(jnp.asarray(_repeat(a)) for a in uu),
+                             h=jnp.asarray(mitsuba_offset(_repeat(wi))))
+    ws = np.stack([np.asarray(c)[:n] for c in ws], axis=1)
     ang = np.arccos(np.clip(np.sum(ws * wo_mi, axis=1), -1, 1))
     # away from a lobe boundary (where float32 rounding of u0 may pick the neighbour lobe)
     # and not the residual lobe: Mitsuba 3.9's sampler leaves its tilted sin/cos(theta_i) at 0
