@@ -117,13 +117,26 @@ def _rgba(img):
 
 
 def _hatch(ax, xe, ye, filled_img):
-    """Hatch the cells of ``filled_img`` (n_y, n_x) > 0.5: values filled by reciprocity."""
+    """Hatch the cells of ``filled_img`` (n_y, n_x) > 0.5: values filled by reciprocity.
+
+    One rectangle per horizontal run of filled cells, not one per cell: on a MERL-sized grid
+    (0.5 deg cells) a pcolor of single cells was 10 of the 11 s a warm report took to draw."""
+    from matplotlib.collections import PolyCollection
+
     f = np.nan_to_num(filled_img) > 0.5
-    if f.any():
-        pc = ax.pcolor(xe, ye, np.ma.masked_where(~f, f.astype(float)), hatch="//",
-                       edgecolor=(1, 1, 1, 0.45), linewidth=0.0)
-        pc.set_facecolor("none")
-        pc.set_gid("reciprocity_fill")
+    if not f.any():
+        return
+    pad = np.zeros((f.shape[0], 1), bool)
+    edges = np.diff(np.concatenate([pad, f, pad], axis=1).astype(np.int8), axis=1)
+    rows, starts = np.nonzero(edges == 1)
+    _, stops = np.nonzero(edges == -1)  # same row order as the starts: runs alternate start/stop
+    x0, x1, y0, y1 = xe[starts], xe[stops], ye[rows], ye[rows + 1]
+    verts = np.stack([np.stack([x0, y0], -1), np.stack([x1, y0], -1),
+                      np.stack([x1, y1], -1), np.stack([x0, y1], -1)], axis=1)
+    pc = PolyCollection(verts, hatch="//", facecolors="none", edgecolors=[(1, 1, 1, 0.45)],
+                        linewidths=0.0)
+    pc.set_gid("reciprocity_fill")
+    ax.add_collection(pc, autolim=False)
 
 
 def maps_figure(result, *, model=None, dpi=90):

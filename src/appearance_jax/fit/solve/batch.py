@@ -65,17 +65,20 @@ class BatchFitResult:
     _z: np.ndarray | None = None
     _data: dict | None = None
     _masked: list | None = None  # per item: reason -> count
+    _cov: dict | None = None  # uncertainty.covariances of every item, (K, ...) arrays
     _solve_kw: dict = dataclasses.field(default_factory=dict)  # rtol, atol, max_steps of the solve
 
     def __len__(self) -> int:
         return self.x.shape[0]
 
     def item(self, k: int) -> FitResult:
-        """The full :class:`FitResult` of item k (recomputes its covariance and error metrics)."""
+        """The full :class:`FitResult` of item k: its covariances from the batch's solve, its fitted
+        values and error metrics computed here."""
         data = {n: (v if n in ("wi", "wo", "cos_i") else v[k]) for n, v in self._data.items()}
         problem = dataclasses.replace(self._problem, masked=self._masked[k])
+        cov = None if self._cov is None else {n: v[k] for n, v in self._cov.items()}
         r = finish(problem, None, self._z[k], 0.5 * self.loss[k] * max(int((np.asarray(data["weight"]) > 0).sum()), 1),
-                   self.iterations[k], self.converged[k], self.wall_time, self.solver, data=data)
+                   self.iterations[k], self.converged[k], self.wall_time, self.solver, data=data, covariances=cov)
         return r
 
     def bootstrap(self, n_boot: int = 64, seed: int = 0, items=None) -> dict:
@@ -194,5 +197,5 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
                           solver=solver, metric=metric, sigma_method=method, sigma_iid=diag(out["iid"]),
                           sigma_hc1=diag(out["hc1"]), sigma_sandwich=diag(out["cr3"]),
                           sigma_cr1=diag(out["cr1"]),
-                          n_clusters=int(np.min(out["g"])), _problem=problem, _z=z, _data=data_k, _masked=masked,
+                          n_clusters=int(np.min(out["g"])), _problem=problem, _z=z, _data=data_k, _masked=masked, _cov=out,
                           _solve_kw=dict(rtol=rtol, atol=atol, max_steps=max_steps))

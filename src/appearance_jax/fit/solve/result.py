@@ -264,10 +264,12 @@ class FitDiverged(ArithmeticError):
 
 
 def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, starts=None, data=None,
-           bootstrap=None) -> FitResult:
+           bootstrap=None, covariances=None) -> FitResult:
     """Turn a solver's z into a :class:`FitResult` (uncertainties, flags, error metrics).
 
     ``bootstrap``: the summary of :func:`~.uncertainty.bootstrap_summary` (plus ``seed``) or None.
+    ``covariances``: the output of :func:`~.uncertainty.covariances` at this optimum when the
+    caller already has it (a batch computes every item's in its solve program), else None.
     """
     data = problem.data if data is None else data
     sp = problem.space
@@ -282,10 +284,12 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
                           "(the residuals became NaN or inf); try other starts (n_starts / --starts), "
                           "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
-    cl = np.asarray(cl)
-    cov_fn = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),
-                           lambda: jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl)), x, data, cl)
-    out = cov_fn(x, data, cl)
+    out = covariances
+    if out is None:
+        cl = np.asarray(cl)
+        cov_fn = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),
+                               lambda: jax.jit(lambda x, d, c: unc.covariances(problem, x, d, c, n_cl)), x, data, cl)
+        out = cov_fn(x, data, cl)
     out = {k: np.asarray(v) for k, v in out.items()}
     x = np.asarray(x, np.float64)
     method, raw, sigma = sigma_kinds(sp, x, out)
