@@ -84,6 +84,14 @@ GRID: dict[str, list[Case]] = {
         Case("default", dict(), opts={"skip": ("gradients",)}),
         Case("rgb_strong", dict(kd=(0.9, 0.5, 0.2), sigma_a=(0.05, 0.3, 0.7), eta1=2.0, eta2=1.3)),
     ],
+    # rock-dove barbules: a wider longitudinal arc and spacing than the thesis fit (gaps, so T > 0, and
+    # a lobe the harness' 128 x 256 furnace quadrature resolves; the thesis fit's 0.08 rad arc needs
+    # the finer rule of SLOW_GRID), a brighter melanin; 2 x 1 nodes for rho: every code path, and the
+    # properties hold at any quadrature (tests/bsdf/test_rock_dove.py checks the default's accuracy)
+    # gradients: forward mode vs differences in tests/bsdf/test_rock_dove.py, reverse mode finite at the
+    # special directions; this check's reverse-mode program takes ~30 s to compile (SLOW_GRID runs it)
+    "rock_dove": [Case("wide_gappy", dict(theta_d=0.3, H=1.8, mu=-0.6, melanin_reflectance=0.3, n_phi=2, n_theta=1),
+                       opts={"skip": ("gradients",)})],
     # SGGX specular microflakes (Eq. 4.10, Padrón 2025); dewy2 (alpha 0.002) is too narrow for the
     # harness quadrature and is checked in tests/phase/test_sggx_flakes.py
     "sggx_flakes": [
@@ -204,6 +212,7 @@ SLOW_GRID: dict[str, list[Case]] = {
         Case("thick_film_beer_sum", dict(thickness=2500.0, absorption="beer_sum", kd=(0.7, 0.4, 0.2), sigma_a=0.3,
                                          eta0=1.1, eta2=1.25)),
     ],
+    "rock_dove": [Case(name, dict(preset=name), opts=_FINE) for name in ("thesis_fit", "ablation_circular")],
     "sggx_flakes": [Case(f"a{a}_t{t}", dict(alpha=a, theta=t), lossless=True)
                     for a in (1.0, 0.5, 0.3) for t in (0.0, 0.6, 1.4)]
     + [Case(name, dict(preset=name), lossless=True, opts=_FINE) for name in ("dewy1", "matte1")],

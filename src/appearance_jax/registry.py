@@ -15,7 +15,8 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 from __future__ import annotations
 
 from .bcsdf import chiang, huang, marschner, sadeghi, thread
-from .bsdf import cloth, cosmetics, cosmetics_ordinates, iridescent, lambert, rough_conductor, rough_dielectric, rough_plastic, snake
+from .bsdf import (cloth, cosmetics, cosmetics_ordinates, iridescent, lambert, rock_dove, rough_conductor, rough_dielectric,
+                   rough_plastic, snake)
 from .bsdf.sum import sum_model
 from .core.model import Model
 from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes, tabulated
@@ -27,6 +28,7 @@ _MODELS: tuple[Model, ...] = (
     rough_plastic.MODEL,
     iridescent.MODEL,
     snake.MODEL,
+    rock_dove.MODEL,
     cosmetics.MODEL,
     cosmetics_ordinates.MODEL,
     cloth.MODEL,

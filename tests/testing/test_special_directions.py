@@ -17,11 +17,13 @@ CHEAP = {
     "cloth": dict(n_samples=2),
     "cloth_weave": dict(n_samples=2),
     "huang_hair": dict(n_intervals=4, n_paths=1),
+    "rock_dove": dict(n_phi=2, n_theta=1),
 }
 
 # models whose eval + gradient take more than ~10 s to compile here: their float32 run is in the
 # slow suite (the default run checks them in float64, the dtype of the other tests)
-HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake"}
+HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake",
+         "rock_dove"}
 # sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
 SLOW = {"rough_plastic+lambert"}
 

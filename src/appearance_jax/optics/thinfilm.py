@@ -261,6 +261,27 @@ def airy_transmittance(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2, pola
     return airy(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2).transmittance(polarization)
 
 
+def airy_trt(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflectance):
+    """Huang Eq. 5.3 (= F.3): film, melanin bounce, film again, for a free-standing film.
+
+    A film of index ``eta_film`` in air (air | film | air) above a melanin layer (rock-dove
+    barbules, Huang Fig. 5.4): the light crosses the film at ``cos_i`` (amplitude t of
+    Eq. 5.1, multiple reflections included), is reflected by the melanin with intensity
+    ``melanin_reflectance`` = |r_am|^2, and crosses the film again at ``cos_o`` (t'). The
+    melanin scatters diffusely, so the two crossings add incoherently and per polarisation
+
+        I_TRT = |t_s|^2 |r_am|^2 |t'_s|^2  (and the same for p),   I = (I_s + I_p) / 2,
+
+    which is |t r_am t'_ak t'_ka / (1 - r'_ka^2 e^{i dpsi'})|^2 of Eq. 5.3, the film's
+    transmittances T = |t|^2 at the two angles (air on both sides: no admittance factor).
+    Symmetric in (cos_i, cos_o). cos in [0, 1]; lengths in nm.
+    """
+    one = jnp.ones((), jnp.result_type(cos_i, float))
+    a = airy(cos_i, wavelength_nm, thickness_nm, one, eta_film, one)
+    b = airy(cos_o, wavelength_nm, thickness_nm, one, eta_film, one)
+    return jnp.asarray(melanin_reflectance) * 0.5 * (a.T_s * b.T_s + a.T_p * b.T_p)
+
+
 def film_period_nm(cos0, wavelength_nm, eta0, eta1):
     """Thickness period lambda / (2 Re q_1) of a non-absorbing film's response (nm).
 

@@ -1,0 +1,322 @@
+"""rock_dove (Huang 2022 Ch. 5): the barbule row's visibility against a brute-force ray cast with
+flatland's own intersection code, the NDF's closed forms and normalisation, the thesis' thin-film
+and melanin numbers, S_R's reciprocity, energy, the sampler's density, trends of App. H, edge
+cases and bad input. The property harness runs the model too (tests/test_properties.py)."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import quad
+
+from appearance_jax.bsdf import barbule_row as row
+from appearance_jax.bsdf import rock_dove as rd
+from appearance_jax.core.vec import Vec3
+from appearance_jax.flatland import geometry as G
+from appearance_jax.optics import melanin
+from appearance_jax.optics.refractive_index import Cauchy
+from appearance_jax.optics.thinfilm import airy, airy_trt
+
+P = rd.Params()
+# rho with fewer nodes: every check below holds at any quadrature, and one static configuration
+# shares its compiled kernels between the tests (compilation is most of their cost)
+Q = rd.Params(n_phi=4)
+
+
+def _dirs(seed, n, lo=0.05, hi=1.5):
+    rng = np.random.default_rng(seed)
+    th, ph = rng.uniform(lo, hi, n), rng.uniform(-math.pi, math.pi, n)
+    return th, ph, Vec3(*(jnp.asarray(v) for v in (np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th))))
+
+
+def _front_first_hits(p, w, n=4000, copies=24):
+    """Brute force: rays over one period of the row from the local direction w (3-tuple), each
+    tested against 2 copies + 1 arcs with flatland.geometry.intersect (flatland's section frame:
+    the row along y = local x, z = the barb-plane normal; the ellipse's first axis at psi = -mu).
+    Returns the fraction whose first hit is on the outer (front) side of an arc."""
+    b, H, mu = float(p.b), float(p.H), float(p.mu)
+    # the arc's normal azimuths [phi0, phi1] as flatland's parametric angles (decreasing in phi)
+    g_hi = math.atan2(b * math.cos(float(p.phi0)), math.sin(float(p.phi0)))
+    g_lo = math.atan2(b * math.cos(float(p.phi1)), math.sin(float(p.phi1)))
+    span = (g_hi - g_lo) % (2 * math.pi)
+    dy, dz = w[0], w[2]
+    r = math.hypot(dy, dz)
+    dy, dz = dy / r, dz / r
+    h = ((np.arange(n) + 0.5) / n - 0.5) * H * abs(dz)  # one period, measured across the rays
+    py, pz = jnp.asarray(-h * dz + 60 * dy)[:, None], jnp.asarray(h * dy + 60 * dz)[:, None]
+    # every copy at once (the launch line is 60 units up: cover its footprint), the nearest hit wins
+    cy = jnp.arange(-copies - 48, copies + 49)[None, :] * H
+    t, hit = G.intersect(py, pz, -dy, -dz, cy, 0.0, 1.0, b, -mu, g_lo, span, jnp.zeros(cy.shape, bool))
+    t = jnp.where(hit, t, jnp.inf)
+    k = jnp.argmin(t, axis=1)[:, None]
+    tk, ck = jnp.take_along_axis(t, k, 1)[:, 0], jnp.take_along_axis(jnp.broadcast_to(cy, t.shape), k, 1)[:, 0]
+    ny, nz = G.normal_at(py[:, 0] - tk * dy, pz[:, 0] - tk * dz, ck, 0.0, 1.0, b, -mu)
+    front = jnp.isfinite(tk) & (ny * dy + nz * dz > 0)
+    return float(jnp.mean(front))
+
+
+# ------------------------------------------------------------------------------ geometry
+
+
+@pytest.mark.parametrize("preset", ["thesis_fit", "ablation_circular", "ablation_spacing_2.5", "ablation_mu_-0.8"])
+def test_valid_fraction_is_the_brute_force_front_hit_fraction(preset):
+    """Delta h'/Delta h (closed-form pieces, one ray test each) against 4000 stratified rays per
+    direction: the stratified estimate of a piecewise-constant fraction errs by <= 1/n per edge."""
+    p = rd.PRESETS[preset]
+    th, ph, w = _dirs(7, 6, 0.2, 1.45)
+    v = np.asarray(rd.valid_fraction(p, w))
+    ref = [_front_first_hits(p, (float(w.x[i]), float(w.y[i]), float(w.z[i]))) for i in range(6)]
+    np.testing.assert_allclose(v, ref, atol=2e-3)
+    assert np.ptp(ref) > 0.05 or preset in ("thesis_fit", "ablation_circular")  # the directions see gaps
+
+
+def test_valid_fraction_on_random_rows_with_gaps_and_back_hits():
+    """Random arcs, spacings and tilts (open arcs: rays can pass under a neighbour into the next one,
+    or hit an arc's inside): the pieces still classify every ray as the brute force does."""
+    rng = np.random.default_rng(3)
+    out, ref = [], []
+    for _ in range(8):
+        p0 = rng.uniform(-1.5, 0.0)
+        p = rd.Params(b=rng.uniform(0.1, 1.0), phi0=p0, phi1=p0 + rng.uniform(1.0, math.pi), H=rng.uniform(0.8, 3.0),
+                      mu=rng.uniform(-1.2, 1.2))
+        _, _, w = _dirs(int(rng.integers(1 << 30)), 1, 0.3, 1.4)
+        out.append(float(rd.valid_fraction(p, w)[0]))
+        ref.append(_front_first_hits(p, (float(w.x[0]), float(w.y[0]), float(w.z[0]))))
+    np.testing.assert_allclose(out, ref, atol=2e-3)
+    assert min(ref) < 0.9  # some rays pass or hit an inside
+
+
+def test_more_neighbours_change_nothing_at_the_presets():
+    _, _, w = _dirs(11, 64)
+    for name in ("thesis_fit", "ablation_mu_-0.8", "ablation_circular"):
+        p = rd.PRESETS[name]
+        np.testing.assert_allclose(np.asarray(rd.valid_fraction(p, w)),
+                                   np.asarray(rd.valid_fraction(p.replace(neighbours=4), w)), rtol=1e-12)
+
+
+def test_curvature_closed_forms():
+    """F-2: 1/kappa(0) = 1/b, 1/kappa(pi/2) = b^2; the arc point of normal azimuth phi has that normal."""
+    b = 0.25
+    assert float(row.radius_of_curvature(0.0, b)) == pytest.approx(1 / b, rel=1e-12)
+    assert float(row.radius_of_curvature(math.pi / 2, b)) == pytest.approx(b * b, rel=1e-12)
+    phi = jnp.linspace(-3.0, 3.0, 13)
+    x, z = row.arc_point(phi, b)
+    np.testing.assert_allclose(np.asarray(x ** 2 + z ** 2 / b ** 2), 1.0, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(row.normal_azimuth(x, z, b)), np.asarray(phi), atol=1e-12)
+
+
+def test_ndf_normalisation_with_and_without_visibility():
+    """F-1 and [T:1632]: the longitudinal factor integrates to 1; the transversal one to the
+    projected arc length / H = 1.3810 at the thesis fit (the barbules overlap), and to exactly 1
+    over the part visible from n (every ray from n lands on a front-facing arc)."""
+    p = P
+    b, H, mu, p0, p1 = 0.25, 1.25, -0.35, -0.37, 2.64
+    d_phi = lambda f: b * b / H * (math.sin(f) ** 2 + b * b * math.cos(f) ** 2) ** -1.5  # noqa: E731  Eq. 5.5
+    no_v = quad(lambda f: d_phi(f) * math.cos(f + mu), p0, p1, limit=200)[0]
+    assert no_v == pytest.approx(1.3810483377, abs=1e-8)
+    # D over a fine (theta, phi) grid, with and without the visibility from n
+    t = np.polynomial.legendre.leggauss(16)
+    theta = 0.5 * float(p.theta_d) * (t[0] + 1) * 2 - float(p.theta_d)
+    wt = float(p.theta_d) * t[1]
+    phi = np.linspace(p0, p1, 60001)
+    wphi = np.full(phi.size, phi[1] - phi[0])
+    wphi[[0, -1]] *= 0.5
+    T, F = np.meshgrid(theta, phi, indexing="ij")
+    d = np.asarray(rd.ndf(p, jnp.asarray(T), jnp.asarray(F)))
+    cos_n = np.cos(T) * np.cos(F + mu)  # <w_m, n>
+    dw = np.cos(T) * wt[:, None] * wphi[None, :]
+    assert np.sum(d * np.maximum(cos_n, 0) * dw) == pytest.approx(quad(lambda f: d_phi(f) * max(math.cos(f + mu), 0),
+                                                                        p0, p1, limit=200)[0], rel=1e-5)
+    sees = np.asarray(rd._sees(p, jnp.asarray(F[0]), jnp.asarray(-math.sin(mu)), jnp.asarray(math.cos(mu))))
+    assert np.sum((d * cos_n * dw)[:, sees]) == pytest.approx(1.0, abs=2e-4)
+    assert float(rd.valid_fraction(p, Vec3(jnp.asarray(0.0), jnp.asarray(0.0), jnp.asarray(1.0)))) == pytest.approx(1.0)
+
+
+def test_visible_normals_integrate_to_the_valid_fraction():
+    """For random w_i: int D V_i <w_i, w_m>+ dw_m = <w_i, n> Delta h'/Delta h (the issue's identity)."""
+    p = rd.PRESETS["ablation_spacing_2.5"]
+    th, ph, w = _dirs(5, 5, 0.2, 1.3)
+    b = rd.to_barbule(p, w)
+    t, wt = np.polynomial.legendre.leggauss(12)
+    theta = jnp.asarray(t * float(p.theta_d))[:, None, None]
+    wt = jnp.asarray(wt * float(p.theta_d))[:, None, None]
+    phi = jnp.linspace(float(p.phi0), float(p.phi1), 20001)[None, :, None]
+    dphi = float(phi[0, 1, 0] - phi[0, 0, 0])
+    dx, dz, c, s, _ = rd._transverse(b)
+    cos_i = c * jnp.cos(theta) * (dx * jnp.sin(phi) + dz * jnp.cos(phi)) + s * jnp.sin(theta)
+    v = rd._sees(p, phi, dx, dz)
+    integrand = rd.ndf(p, theta, phi) * jnp.where(v, jnp.maximum(cos_i, 0), 0) * jnp.cos(theta) * wt * dphi
+    lhs = np.asarray(jnp.sum(integrand, axis=(0, 1)))
+    np.testing.assert_allclose(lhs, np.asarray(w.z * rd.valid_fraction(p, w)), rtol=2e-3)
+
+
+# ------------------------------------------------------------------------------ optics
+
+
+def test_film_numbers_of_the_thesis():
+    """TF-4/TF-6: d = 590 nm, eta = 1.55, normal incidence: maxima 406.4/522.6/731.6 nm with
+    R = 0.16991, zeros (total destructive interference, [T:1562]) at 457.2/609.7 nm."""
+    p = rd.Params(color="spectral", wavelengths=(406.4, 457.2, 522.6, 609.7, 731.6), eta_keratin=1.55)
+    r = np.asarray(rd.film_r(p, jnp.asarray(1.0)))
+    np.testing.assert_allclose(r[[0, 2, 4]], 0.16991, atol=2e-5)
+    np.testing.assert_allclose(r[[1, 3]], 0.0, atol=2e-6)
+    # R -> 1 at grazing
+    assert float(rd.film_r(p, jnp.asarray(1e-6))[0]) > 0.999
+
+
+def test_melanin_numbers_of_app_g():
+    assert float(melanin.absorption_coefficient(0.0632, 589.0)) == pytest.approx(1.348e-3, rel=1e-3)
+    assert float(melanin.transmittance(0.0632, 589.0, 2000.0)) == pytest.approx(0.0674, abs=2e-4)
+    assert float(melanin.normal_reflectance(1.648, 0.0632)) == pytest.approx(0.0604, abs=1e-4)
+    assert float(P.melanin_reflectance) == pytest.approx(float(melanin.normal_reflectance(1.648, 0.0632)), abs=1e-4)
+
+
+def test_trt_is_symmetric_and_bounded_by_the_film_transmittance():
+    """F-5: I_TRT(i, o) = I_TRT(o, i); with a white melanin and one angle it is T_s^2/2 + T_p^2/2."""
+    c = jnp.linspace(0.0, 1.0, 11)
+    ci, co = c[:, None], c[None, :]
+    v = np.asarray(airy_trt(ci, co, 550.0, 590.0, 1.55, 1.0))
+    np.testing.assert_allclose(v, v.T, rtol=1e-12)
+    f = airy(c, 550.0, 590.0, 1.0, 1.55, 1.0)
+    np.testing.assert_allclose(np.diag(v), 0.5 * np.asarray(f.T_s ** 2 + f.T_p ** 2), rtol=1e-12)
+    assert np.all(v <= 1.0 + 1e-12) and np.all(v >= 0)
+
+
+def test_cauchy_keratin_is_the_refractive_index_module_law():
+    p = rd.Params(keratin="cauchy", color="spectral", wavelengths=(450.0, 589.0, 700.0))
+    wl = jnp.asarray([450.0, 589.0, 700.0])
+    np.testing.assert_allclose(np.asarray(rd.keratin_index(p, wl)), np.asarray(Cauchy(A=1.532, B=5.89e-3)(wl)[0]),
+                               rtol=1e-12)
+
+
+# ------------------------------------------------------------------------------ the BSDF
+
+
+def test_mirror_lobe_is_reciprocal_and_the_trt_lobe_is_not():
+    """S_R(i, o) = S_R(o, i) (melanin off: S = S_R); with the melanin on, rho averages over the area
+    lit from w_i (Huang Eq. 5.17), so swapping the directions changes it."""
+    _, _, wi = _dirs(21, 400)
+    _, _, wo = _dirs(22, 400)
+    p = rd.Params(melanin_reflectance=0.0)
+    a, b = np.asarray(rd.eval(p, wi, wo)), np.asarray(rd.eval(p, wo, wi))
+    assert np.count_nonzero(a.sum(-1)) > 20  # the pairs do hit the mirror lobe
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-14)
+    a, b = np.asarray(rd.eval(P, wi, wo)), np.asarray(rd.eval(P, wo, wi))
+    assert np.max(np.abs(a - b) / np.maximum(a, b).max()) > 1e-3
+
+
+def test_reflection_plus_transmission_conserve_energy():
+    """int (S_R + S_TRT) <w_o, n> dw_o + S_T <= 1 (I_R + I_TRT <= 1 at every facet), and with the
+    film's and melanin's reflectances both 1 the R lobe alone carries (Delta h'/Delta h)."""
+    from appearance_jax.core.quadrature import sphere_rule
+
+    wo, wq = sphere_rule(96, 192, hemisphere=True)
+    for name in ("thesis_fit", "ablation_spacing_2.5"):
+        p = rd.PRESETS[name].replace(n_phi=4)
+        for theta_i, phi_i in ((0.3, 0.4), (1.1, -2.0), (1.3, 0.2)):
+            wi = Vec3(*(jnp.full(wo.x.shape, v) for v in (math.sin(theta_i) * math.cos(phi_i),
+                                                             math.sin(theta_i) * math.sin(phi_i), math.cos(theta_i))))
+            a = np.asarray(jnp.sum(rd.eval(p, wi, wo) * (wo.z * wq)[:, None], axis=0))
+            t = float(rd.transmission(p, wi)[0])
+            assert np.all(a + t <= 1.0 + 2e-3), (name, theta_i, a, t)
+            assert np.all(a > 0.02)
+
+
+def test_sampler_density_integrates_and_matches_its_histogram():
+    """pdf integrates to (P_R x the part of the mirror directions above the plane) + (1 - P_R) <= 1;
+    the sample/eval/pdf consistency and chi-square are the harness' (tests/test_properties.py)."""
+    from appearance_jax.core.quadrature import sphere_rule
+
+    wo, wq = sphere_rule(128, 256, hemisphere=True)
+    wi = Vec3(*(jnp.full(wo.x.shape, v) for v in (0.4, 0.2, math.sqrt(1 - 0.2))))
+    total = float(jnp.sum(rd.pdf(Q, wi, wo) * wq))
+    assert 0.9 < total <= 1.0 + 5e-3
+    u = jax.random.uniform(jax.random.PRNGKey(3), (5, 4000))
+    wi_s = Vec3(*(jnp.full(4000, v) for v in (0.4, 0.2, math.sqrt(1 - 0.2))))
+    w_s, weight, pdf = rd.sample(Q, wi_s, tuple(u))
+    ok = np.asarray(pdf) > 0
+    assert ok.mean() > 0.8
+    np.testing.assert_allclose(np.asarray(pdf)[ok], np.asarray(rd.pdf(Q, wi_s, w_s))[ok], rtol=1e-6)
+    f = np.asarray(rd.eval(Q, wi_s, w_s))
+    np.testing.assert_allclose(np.asarray(weight)[ok], (f * np.asarray(w_s.z)[:, None])[ok] / np.asarray(pdf)[ok, None],
+                               rtol=1e-6)
+
+
+def test_app_h_trends():
+    """[T:2297]: a wider spacing or a steeper barbule lets more light through (T up, R down);
+    a wider longitudinal arc spreads the mirror lobe along the barbule."""
+    _, _, w = _dirs(31, 300, 0.1, 1.4)
+    base = float(jnp.mean(rd.transmission(P, w)))
+    assert float(jnp.mean(rd.transmission(rd.PRESETS["ablation_spacing_2.5"], w))) > base + 0.05
+    assert float(jnp.mean(rd.transmission(rd.PRESETS["ablation_mu_-0.8"], w))) > base + 0.02
+    # longitudinal spread: the mirror lobe's extent in w_o.y about the specular direction
+    wi = Vec3(jnp.asarray(0.3), jnp.asarray(0.0), jnp.asarray(math.sqrt(1 - 0.09)))
+    y = jnp.linspace(-0.4, 0.4, 161)
+    wo = Vec3(jnp.full(161, -0.3), y, jnp.sqrt(1 - 0.09 - y * y))
+    narrow = np.asarray(rd.eval(P.replace(melanin_reflectance=0.0), wi, wo)).sum(-1) > 0
+    wide = np.asarray(rd.eval(rd.PRESETS["ablation_theta_d_0.1571"].replace(melanin_reflectance=0.0), wi, wo)).sum(-1) > 0
+    assert wide.sum() > 1.6 * narrow.sum() > 0
+
+
+def test_edge_directions_are_finite_with_finite_gradients():
+    """Grazing <w, n> = 0, w along the barbule axis, directions on opposite sides (only the T delta
+    connects them) and a pair below the plane (0; the barb's underside is rd.underside)."""
+    cases = [((0.6, 0.0, 0.8), (1.0, 0.0, 0.0)), ((0.0, 1.0, 0.0), (0.0, 0.6, 0.8)), ((0.6, 0.0, 0.8), (0.0, 0.6, -0.8)),
+             ((0.0, 0.0, 1.0), (0.0, 0.0, 1.0)), ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0))]
+    wi, wo = (Vec3(*(jnp.asarray([c[j][k] for c in cases]) for k in range(3))) for j in (0, 1))
+    f = np.asarray(rd.eval(Q, wi, wo))
+    assert np.all(np.isfinite(f)) and np.all(f[[0, 1, 2, 4]] == 0) and np.all(f[3] > 0)
+    assert np.all(np.isfinite(np.asarray(rd.pdf(Q, wi, wo))))
+    # d eval, d pdf at these directions: tests/testing/test_special_directions.py (horizon_y is the
+    # barbule axis); the transmission is checked here
+    g = jax.grad(lambda q: jnp.sum(rd.transmission(q, wi)))(Q)
+    assert all(np.all(np.isfinite(np.asarray(v))) for v in jax.tree_util.tree_leaves(g))
+    assert np.all(np.isfinite(np.asarray(rd.transmission(Q, wi))))
+    wi_b = Vec3(jnp.asarray(-0.3), jnp.asarray(0.1), jnp.asarray(-math.sqrt(0.9)))
+    wo_b = Vec3(jnp.asarray(0.5), jnp.asarray(0.05), jnp.asarray(-math.sqrt(0.7475)))
+    assert np.all(np.asarray(rd.eval(Q, wi_b, wo_b)) == 0)  # a reflection BSDF: 0 below the plane
+    below = rd.eval(Q, rd.underside(wi_b), rd.underside(wo_b))  # the barb's underside, seen from above
+    above = rd.eval(Q, Vec3(jnp.asarray(0.3), jnp.asarray(0.1), jnp.asarray(math.sqrt(0.9))),
+                    Vec3(jnp.asarray(-0.5), jnp.asarray(0.05), jnp.asarray(math.sqrt(0.7475))))
+    np.testing.assert_allclose(np.asarray(below), np.asarray(above), rtol=1e-12)
+
+
+def test_gradients_match_finite_differences():
+    """AD of a sum of values vs central differences: the film (thickness), the ellipse (b)
+    and the arc half-angle on the TRT lobe (smooth in them); spacing, tilt and the arc's ends
+    move the lit intervals' ends continuously, so rho is differentiable there too."""
+    _, _, wi = _dirs(41, 64, 0.2, 1.2)
+    _, _, wo = _dirs(42, 64, 0.2, 1.2)
+    base = Q.replace(melanin_reflectance=0.5)
+
+    def total(q):
+        return jnp.sum(rd.eval(q, wi, wo) * jnp.asarray([1.0, 0.7, 0.4]))
+
+    g = jax.jacfwd(total)(base)  # forward mode, as a fit's Jacobian (reverse mode: the special directions test)
+    for name, h in (("thickness", 1e-3), ("b", 1e-6), ("theta_d", 1e-6), ("H", 1e-6), ("mu", 1e-6),
+                    ("phi0", 1e-6), ("phi1", 1e-6)):
+        v = float(getattr(base, name))
+        fd = (float(total(base.replace(**{name: v + h}))) - float(total(base.replace(**{name: v - h})))) / (2 * h)
+        ad = float(getattr(g, name))
+        # S_R's support (D's ends, the binary G) is not differentiable: the pairs keep off its edges
+        # at these steps, so the two agree to the differences' rounding
+        assert ad == pytest.approx(fd, rel=2e-4, abs=1e-7), (name, ad, fd)
+
+
+@pytest.mark.parametrize("kw, match", [
+    (dict(b=0.0), r"b = 0"), (dict(b=1.5), r"b = 1.5"), (dict(H=0.0), r"H = 0"), (dict(thickness=-1.0), "thickness"),
+    (dict(theta_d=0.0), "theta_d"), (dict(theta_d=2.0), "theta_d"), (dict(mu=1.6), "mu"), (dict(mu=-1.6), "mu"),
+    (dict(phi0=1.0, phi1=0.5), r"phi0 = 1.0, phi1 = 0.5"), (dict(phi0=-1.0, phi1=2.5), "phi0 = -1.0, phi1 = 2.5"),
+    (dict(melanin_reflectance=1.2), "melanin_reflectance"), (dict(eta_keratin=0.5), "eta_keratin"),
+    (dict(neighbours=0), "neighbours"), (dict(n_phi=0), "n_phi"), (dict(color="xyz"), "color"),
+])
+def test_bad_parameters_are_named(kw, match):
+    with pytest.raises(ValueError, match=match):
+        rd.Params(**kw)
+
+
+def test_bad_wavelengths_are_named():
+    with pytest.raises(ValueError, match="wavelength"):
+        rd.Params(color="spectral", wavelengths=(500.0, -3.0))
