@@ -320,3 +320,36 @@ def test_bad_parameters_are_named(kw, match):
 def test_bad_wavelengths_are_named():
     with pytest.raises(ValueError, match="wavelength"):
         rd.Params(color="spectral", wavelengths=(500.0, -3.0))
+
+
+def test_algorithm_1_estimates_the_whole_bsdf_with_the_delta():
+    """Huang's Algorithm 1 (sample_lobes): E[weight g(w_o)] = int S <w_o, n> g dw_o + S_T g(-w_i) for
+    g = 1, w_o.x, w_o.y (quadrature of eval; sampled means within 4.5 standard errors + the
+    quadrature's error), the T lobe's mass is S_T, and a grey film's sample value
+    (I_R + I_TRT - 1) f + 1 is <= 1 (F-6)."""
+    from appearance_jax.core.quadrature import sphere_rule
+
+    p = rd.Params(theta_d=0.3, H=1.8, mu=-0.6, melanin_reflectance=0.3, n_phi=4)  # a lobe the rule resolves
+    wq_dirs, wq = sphere_rule(160, 320, hemisphere=True)
+    n = 60000
+    ts = []
+    for wi3 in ((0.5, 0.2, math.sqrt(0.71)), (-0.8, 0.3, math.sqrt(0.27))):
+        wi = Vec3(*(jnp.full(n, v) for v in wi3))
+        wo, weight, lobe = rd.sample_lobes(p, wi, jax.random.key(11))
+        weight, lobe = np.asarray(weight), np.asarray(lobe)
+        wiq = Vec3(*(jnp.full(wq_dirs.x.shape, v) for v in wi3))
+        fq = np.asarray(rd.eval(p, wiq, wq_dirs)) * np.asarray(wq_dirs.z * wq)[:, None]
+        t = float(rd.transmission(p, wiq)[0])
+        for g_s, g_q, g_t in ((1.0, 1.0, 1.0), (np.asarray(wo.x), np.asarray(wq_dirs.x), -wi3[0]),
+                              (np.asarray(wo.y), np.asarray(wq_dirs.y), -wi3[1])):
+            est = weight * np.broadcast_to(np.asarray(g_s), (n,))[:, None]
+            mean, se = est.mean(0), est.std(0) / math.sqrt(n)
+            ref = (fq * np.broadcast_to(np.asarray(g_q), fq.shape[:1])[:, None]).sum(0) + t * g_t
+            assert np.all(np.abs(mean - ref) <= 4.5 * se + 2e-3), (wi3, mean, ref, se)
+        assert np.mean(np.where(lobe == 2, weight[:, 0], 0.0)) == pytest.approx(t, abs=4.5 * 0.5 / math.sqrt(n) + 1e-9)
+        ts.append(t)
+    assert max(ts) > 0.2 and min(ts) == 0  # one direction sees gaps between the barbules, the other none
+    grey = rd.Params(color="spectral", wavelengths=(550.0,))
+    wi = Vec3(*(jnp.full(20000, v) for v in (0.6, 0.1, math.sqrt(0.63))))
+    _, weight, lobe = rd.sample_lobes(grey, wi, jax.random.key(2))
+    assert float(jnp.max(weight)) <= 1.0 + 1e-12

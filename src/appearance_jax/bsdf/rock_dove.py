@@ -43,7 +43,8 @@ seen from w_i and theta_m from its exact conditional law, which together is exac
 visible-normal density D <w_i, w_m> / (<w_i, n> Delta h'/Delta h) (Huang's Algorithm 1
 samples l uniformly, an approximation); then the mirror direction (probability P_R from the
 film's reflectance at w_i) or a cosine-weighted direction about n. The T delta is not part of
-``sample``: :func:`transmission` gives its weight.
+``sample``: :func:`transmission` gives its weight. :func:`sample_lobes` is Huang's Algorithm 1,
+one estimator of the whole BSDF with the T delta (a path tracer's sampler).
 
 | parameter           | default | range            | unit | meaning                                             |
 |---------------------|---------|------------------|------|-----------------------------------------------------|
@@ -412,10 +413,56 @@ def _sample(p: Params, wi: Vec3, u):
     return wo, weight, jnp.where(ok, pdf, 0.0)
 
 
+LOBES = ("R", "TRT", "T")
+
+
+def _sample_lobes(p: Params, wi: Vec3, u):
+    """Huang's Algorithm 1 [T:1708-1733]: one estimator of the whole BSDF, the T delta included.
+
+    A lit surface point and its normal are drawn as in :func:`sample` (exact visible normals,
+    where the thesis draws l uniformly); I_R at w_m and I_TRT at a cosine-weighted w_o^TRT about n;
+    the lobe is chosen with probabilities prop. to (f I_R, f I_TRT, 1 - f), f = Delta h'/Delta h
+    (the thesis' I_R, I_TRT, Delta h/Delta h' - 1 times f; band means); the sample is rejected
+    (weight 0) where the point does not see w_o. Unrejected, every band's weight is
+    ``value / P(lobe)``; for one band it is the thesis' sample value (I_R + I_TRT - 1) f + 1 <= 1.
+    E[weight g(w_o)] = int S <w_o, n> g dw_o + S_T g(-w_i) for any g. Returns
+    ``(wo, weight (..., bands), lobe)``, lobe an index into :data:`LOBES`; 0 weight below the plane.
+    """
+    ul, uh, ut, u1, u2 = uniforms(u, jnp.shape(wi.z), 5)
+    bi = to_barbule(p, wi)
+    mirror_b, any_lit = _sample_mirror(p, bi, uh, ut)
+    m = V.normalize(bi + mirror_b)  # the sampled normal (barbule frame)
+    cos_m = jnp.clip(V.dot(bi, m), 0.0, 1.0)
+    trt = warp.square_to_cosine_hemisphere(u1, u2)
+    bt = to_barbule(p, trt)
+    cos_t = V.dot(bt, m)
+    i_r = film_r(p, cos_m)
+    i_trt = jnp.where(with_bands(cos_t > 0), film_trt(p, cos_m, jnp.clip(cos_t, 0.0, 1.0)), 0.0)
+    f = valid_fraction(p, wi)
+    f = jnp.where(any_lit, f, 0.0)
+    w_r, w_t = f * jnp.mean(i_r, -1), f * jnp.mean(i_trt, -1)
+    w_d = 1.0 - f
+    tot = w_r + w_t + w_d
+    x = ul * tot
+    lobe = jnp.where(x < w_r, 0, jnp.where(x < w_r + w_t, 1, 2))
+    wo = V.where(lobe == 0, from_barbule(p, mirror_b), V.where(lobe == 1, trt, -wi))
+    # the point must see w_o (R and TRT; T passes between the barbules)
+    dxo, dzo, _, _, _ = _transverse(to_barbule(p, wo))
+    phi_m = atan2(m.x, m.z)
+    sees = _sees(p, phi_m, dxo, dzo) & (wo.z > 0)
+    value = jnp.where(with_bands(lobe == 0), with_bands(f) * i_r,
+                      jnp.where(with_bands(lobe == 1), with_bands(f) * i_trt, with_bands(w_d)))
+    prob = jnp.where(lobe == 0, w_r, jnp.where(lobe == 1, w_t, w_d)) / jnp.where(tot > 0, tot, 1.0)
+    ok = (wi.z > 0) & (prob > 0) & ((lobe == 2) | sees)
+    weight = jnp.where(with_bands(ok), value / with_bands(jnp.where(ok, prob, 1.0)), 0.0)
+    return wo, weight, lobe
+
+
 eval = boundary(_eval, Params)
 pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 transmission = boundary(_transmission, Params)
+sample_lobes = boundary(_sample_lobes, Params)
 
 # Huang's hand fit to the scatterograms [T:1746] and the five one-parameter ablations of
 # App. H, Fig. H.1 [T:2291]; everything else at the defaults.
