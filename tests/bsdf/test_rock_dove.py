@@ -60,7 +60,9 @@ def _front_first_hits(p, w, n=4000, copies=24):
 # ------------------------------------------------------------------------------ geometry
 
 
-@pytest.mark.parametrize("preset", ["thesis_fit", "ablation_circular", "ablation_spacing_2.5", "ablation_mu_-0.8"])
+@pytest.mark.parametrize("preset", ["thesis_fit", "ablation_spacing_2.5",
+                                    pytest.param("ablation_circular", marks=pytest.mark.slow),
+                                    pytest.param("ablation_mu_-0.8", marks=pytest.mark.slow)])
 def test_valid_fraction_is_the_brute_force_front_hit_fraction(preset):
     """Delta h'/Delta h (closed-form pieces, one ray test each) against 4000 stratified rays per
     direction: the stratified estimate of a piecewise-constant fraction errs by <= 1/n per edge."""
@@ -88,6 +90,7 @@ def test_valid_fraction_on_random_rows_with_gaps_and_back_hits():
     assert min(ref) < 0.9  # some rays pass or hit an inside
 
 
+@pytest.mark.slow  # a convergence check of the default (the brute-force tests cover the values)
 def test_more_neighbours_change_nothing_at_the_presets():
     _, _, w = _dirs(11, 64)
     for name in ("thesis_fit", "ablation_mu_-0.8", "ablation_circular"):
@@ -330,8 +333,8 @@ def test_algorithm_1_estimates_the_whole_bsdf_with_the_delta():
     from appearance_jax.core.quadrature import sphere_rule
 
     p = rd.Params(theta_d=0.3, H=1.8, mu=-0.6, melanin_reflectance=0.3, n_phi=4)  # a lobe the rule resolves
-    wq_dirs, wq = sphere_rule(160, 320, hemisphere=True)
-    n = 60000
+    wq_dirs, wq = sphere_rule(128, 256, hemisphere=True)
+    n = 40000
     ts = []
     for wi3 in ((0.5, 0.2, math.sqrt(0.71)), (-0.8, 0.3, math.sqrt(0.27))):
         wi = Vec3(*(jnp.full(n, v) for v in wi3))
