@@ -356,3 +356,16 @@ def test_algorithm_1_estimates_the_whole_bsdf_with_the_delta():
     wi = Vec3(*(jnp.full(20000, v) for v in (0.6, 0.1, math.sqrt(0.63))))
     _, weight, lobe = rd.sample_lobes(grey, wi, jax.random.key(2))
     assert float(jnp.max(weight)) <= 1.0 + 1e-12
+
+
+def test_an_arc_wider_than_pi_inside_a_fit_is_held_at_pi():
+    """Params() rejects phi1 > phi0 + pi; a fit's traced Params skip that check, and the kernels
+    then hold phi1 at phi0 + pi (flat beyond it) rather than run the one-piece geometry on a
+    wider arc."""
+    _, _, wi = _dirs(51, 16)
+    _, _, wo = _dirs(52, 16)
+    edge = Q.replace(phi1=float(Q.phi0) + math.pi)
+    wide = jax.jit(lambda v: rd.eval.kernel(Q.replace(phi1=v), wi, wo))(float(Q.phi0) + math.pi + 0.3)
+    np.testing.assert_allclose(np.asarray(wide), np.asarray(rd.eval(edge, wi, wo)), rtol=1e-12)
+    t = jax.jit(lambda v: rd.transmission.kernel(Q.replace(phi1=v), wi))(float(Q.phi0) + math.pi + 0.3)
+    np.testing.assert_allclose(np.asarray(t), np.asarray(rd.transmission(edge, wi)), rtol=1e-12, atol=1e-14)

@@ -315,7 +315,16 @@ def _s_trt(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
     return rho * with_bands(jnp.where(ok, 1.0 / (jnp.pi * jnp.where(ok, wi.z, 1.0)), 0.0))
 
 
+def _arc_within_pi(p: Params) -> Params:
+    """phi1 limited to phi0 + pi inside traced code. Params() rejects a wider arc eagerly; a fit
+    builds its Params from traced values, which skip that check, and the geometry assumes the arc
+    faces any direction in one piece: beyond the limit the model is flat in phi1 (the fit sees a
+    bound) instead of silently wrong."""
+    return p.replace(phi1=jnp.minimum(p.phi1, p.phi0 + math.pi))
+
+
 def _eval(p: Params, wi: Vec3, wo: Vec3):
+    p = _arc_within_pi(p)
     bi, bo = to_barbule(p, wi), to_barbule(p, wo)
     f = _s_r(p, wi, wo, bi, bo) + _s_trt(p, wi, wo, bi, bo)
     ok = (wi.z > 0) & (wo.z > 0)
@@ -326,6 +335,7 @@ def _transmission(p: Params, wi: Vec3):
     """S_T (Huang Eq. 5.15): the fraction of the light from ``wi`` that passes between the barbules
     unchanged (to -wi); wavelength-independent, shape of ``wi``. Light from below the barb plane
     sees the row from its other side: ``wi`` is turned by :func:`underside` there."""
+    p = _arc_within_pi(p)
     w = V.where(wi.z < 0, underside(wi), wi)
     return 1.0 - valid_fraction(p, w)
 
@@ -373,6 +383,7 @@ def _pdf_r(p: Params, bi: Vec3, bo: Vec3):
 
 
 def _pdf(p: Params, wi: Vec3, wo: Vec3):
+    p = _arc_within_pi(p)
     ok = (wi.z > 0) & (wo.z > 0)
     pr = _p_r(p, wi)
     dens = pr * _pdf_r(p, to_barbule(p, wi), to_barbule(p, wo)) + (1.0 - pr) * jnp.maximum(wo.z, 0.0) / jnp.pi
@@ -401,6 +412,7 @@ def _sample_mirror(p: Params, bi: Vec3, uh, ut):
 
 
 def _sample(p: Params, wi: Vec3, u):
+    p = _arc_within_pi(p)
     ul, uh, ut, u1, u2 = uniforms(u, jnp.shape(wi.z), 5)
     w = wi
     mirror, any_lit = _sample_mirror(p, to_barbule(p, w), uh, ut)
@@ -428,6 +440,7 @@ def _sample_lobes(p: Params, wi: Vec3, u):
     E[weight g(w_o)] = int S <w_o, n> g dw_o + S_T g(-w_i) for any g. Returns
     ``(wo, weight (..., bands), lobe)``, lobe an index into :data:`LOBES`; 0 weight below the plane.
     """
+    p = _arc_within_pi(p)
     ul, uh, ut, u1, u2 = uniforms(u, jnp.shape(wi.z), 5)
     bi = to_barbule(p, wi)
     mirror_b, any_lit = _sample_mirror(p, bi, uh, ut)
