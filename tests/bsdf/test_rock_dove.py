@@ -121,7 +121,7 @@ def test_ndf_normalisation_with_and_without_visibility():
     assert no_v == pytest.approx(1.3810483377, abs=1e-8)
     # D over a fine (theta, phi) grid, with and without the visibility from n
     t = np.polynomial.legendre.leggauss(16)
-    theta = 0.5 * float(p.theta_d) * (t[0] + 1) * 2 - float(p.theta_d)
+    theta = float(p.theta_d) * t[0]
     wt = float(p.theta_d) * t[1]
     phi = np.linspace(p0, p1, 60001)
     wphi = np.full(phi.size, phi[1] - phi[0])
@@ -147,7 +147,7 @@ def test_visible_normals_integrate_to_the_valid_fraction():
     wt = jnp.asarray(wt * float(p.theta_d))[:, None, None]
     phi = jnp.linspace(float(p.phi0), float(p.phi1), 20001)[None, :, None]
     dphi = float(phi[0, 1, 0] - phi[0, 0, 0])
-    dx, dz, c, s, _ = rd._transverse(b)
+    dx, dz, c, s = rd._transverse(b)
     cos_i = c * jnp.cos(theta) * (dx * jnp.sin(phi) + dz * jnp.cos(phi)) + s * jnp.sin(theta)
     v = rd._sees(p, phi, dx, dz)
     integrand = rd.ndf(p, theta, phi) * jnp.where(v, jnp.maximum(cos_i, 0), 0) * jnp.cos(theta) * wt * dphi

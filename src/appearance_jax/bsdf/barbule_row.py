@@ -187,8 +187,7 @@ def lit_pieces(dx, dz, b, phi0, phi1, H, mu, neighbours: int = 2):
 
 def lit_runs(bp, lit, n_runs: int):
     """The first ``n_runs`` maximal runs of consecutive lit pieces, as (start, end) normal
-    azimuths (..., n_runs) each; missing runs are empty (start = end). Returns
-    ``(start, end, complete)``, ``complete`` False where the arc has more lit runs than that.
+    azimuths (..., n_runs) each; missing runs (and any beyond ``n_runs``) are empty (start = end).
     Empty pieces (coincident candidates) take the state of the last non-empty one before them,
     so that they do not split a run."""
     width = bp[..., 1:] > bp[..., :-1]
@@ -207,7 +206,7 @@ def lit_runs(bp, lit, n_runs: int):
         c = jnp.take_along_axis(bp[..., 1:], i1, axis=-1)
         starts.append(jnp.where(have, a, 0.0))
         ends.append(jnp.where(have, c, 0.0))
-    return jnp.concatenate(starts, -1), jnp.concatenate(ends, -1), r_first[..., -1] <= n_runs
+    return jnp.concatenate(starts, -1), jnp.concatenate(ends, -1)
 
 
 def valid_fraction(dx, dz, b, phi0, phi1, H, mu, neighbours: int = 2):
@@ -216,6 +215,6 @@ def valid_fraction(dx, dz, b, phi0, phi1, H, mu, neighbours: int = 2):
     the barb plane."""
     _, lit, dh = lit_pieces(dx, dz, b, phi0, phi1, H, mu, neighbours)
     valid = jnp.sum(jnp.where(lit, dh, 0.0), axis=-1)
-    period = jnp.asarray(H) * jnp.abs(jnp.cos(atan2(dx, dz) + mu))
+    period = jnp.asarray(H) * jnp.abs(dz * jnp.cos(mu) - dx * jnp.sin(mu))  # H |cos(phi_d + mu)|
     ok = period > 0
     return jnp.where(ok, jnp.clip(valid / jnp.where(ok, period, 1.0), 0.0, 1.0), 0.0)
