@@ -24,7 +24,9 @@ def throughput_args(doc, n=1_000_000):
     import jax
 
     jax.config.update("jax_num_cpu_devices", args.devices)
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; n = {args.n:,} direction pairs")
+    dev = jax.devices()[0]
+    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; JAX {jax.__version__} on "
+          f"{dev.platform} ({dev.device_kind}); n = {args.n:,} direction pairs")
     return args
 
 
@@ -108,18 +110,34 @@ def _find_libllvm():
     return None
 
 
+def mitsuba_variant():
+    """The Mitsuba variant the benchmarks compare against: ``$APPEARANCE_JAX_BENCH_MITSUBA``,
+    default ``llvm_ad_rgb`` (the CPU peer); ``cuda_ad_rgb`` on a GPU machine."""
+    return os.environ.get("APPEARANCE_JAX_BENCH_MITSUBA", "llvm_ad_rgb")
+
+
 def mitsuba_llvm():
-    """``(drjit, mitsuba)`` with the ``llvm_ad_rgb`` variant set, or ``(None, reason)`` when the
-    peer is unavailable (Mitsuba's LLVM backend needs a system libLLVM >= 16)."""
-    if "DRJIT_LIBLLVM_PATH" not in os.environ:
+    """``(drjit, mitsuba)`` with the peer variant set (:func:`mitsuba_variant`, ``llvm_ad_rgb``
+    unless the environment names another), or ``(None, reason)`` when the peer is unavailable
+    (Mitsuba's LLVM backend needs a system libLLVM >= 16, its CUDA backend a GPU driver)."""
+    variant = mitsuba_variant()
+    if variant.startswith("llvm") and "DRJIT_LIBLLVM_PATH" not in os.environ:
         lib = _find_libllvm()
-        if lib:
-            os.environ["DRJIT_LIBLLVM_PATH"] = lib
+        if not lib:  # Dr.Jit would load an older libLLVM it cannot generate code with, and abort
+            return None, "unavailable (no system libLLVM >= 16 found; set DRJIT_LIBLLVM_PATH)"
+        os.environ["DRJIT_LIBLLVM_PATH"] = lib
     try:
         import drjit as dr
         import mitsuba as mi
 
-        mi.set_variant("llvm_ad_rgb")
+        mi.set_variant(variant)
     except Exception as e:  # noqa: BLE001 - any failure means "peer unavailable"
         return None, f"unavailable ({type(e).__name__}: {e})"
     return dr, mi
+
+
+def mitsuba_label(mi, what=""):
+    """``mitsuba <version> <variant> [what]`` (and the libLLVM used, for the LLVM backend)."""
+    v = mi.variant()
+    lib = f" ({os.environ.get('DRJIT_LIBLLVM_PATH')})" if v.startswith("llvm") else ""
+    return f"mitsuba {mi.__version__} {v}{(' ' + what) if what else ''}{lib}"

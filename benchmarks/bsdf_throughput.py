@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 import sys
 
-from _common import best_time, best_times, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_time, best_times, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
@@ -108,7 +108,7 @@ def bench_mitsuba(wi_np, wo_np, repeats):
 
     t_eval = best_time(run_eval, repeats)
     t_grad = best_time(run_grad, repeats)
-    return t_eval, t_grad, f"mitsuba {mi.__version__} llvm_ad_rgb ({os.environ.get('DRJIT_LIBLLVM_PATH')})"
+    return t_eval, t_grad, mitsuba_label(mi, "")
 
 
 def main():

@@ -94,12 +94,17 @@ def main():
     print(head)
     print("|" + "---|" * (head.count("|") - 1))
     for name in names:
-        if a.warm:
-            with tempfile.TemporaryDirectory() as d:
-                r = run_child(name, a.n, a.x64, d)
-                w = run_child(name, a.n, a.x64, d)
-        else:
-            r, w = run_child(name, a.n, a.x64, None), None
+        try:
+            if a.warm:
+                with tempfile.TemporaryDirectory() as d:
+                    r = run_child(name, a.n, a.x64, d)
+                    w = run_child(name, a.n, a.x64, d)
+            else:
+                r, w = run_child(name, a.n, a.x64, None), None
+        except RuntimeError as e:  # one model that does not compile must not hide the others' rows
+            last = [ln for ln in str(e).splitlines() if ln.strip()][-3:]
+            print(f"| {name} | failed: {' / '.join(last)[:300]} |", flush=True)
+            continue
         row = (f"| {name} | {r['trace_s']:.2f} | {r['compile_s']:.2f} | {r['trace_s'] + r['compile_s']:.2f} "
                f"| {r['run_s']:.3f} |")
         if w is not None:

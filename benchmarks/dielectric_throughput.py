@@ -25,7 +25,7 @@ import sys
 import time
 
 import numpy as np
-from _common import best_times, mitsuba_eval_fn, mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args
 
 ALPHA, INT_IOR, EXT_IOR = 0.3, 1.5, 1.0
 
@@ -86,7 +86,7 @@ def mitsuba_eval(wi_np, wo_np):
                          "int_ior": INT_IOR, "ext_ior": EXT_IOR, "sample_visible": True})
     run = mitsuba_eval_fn(dr, mi, bsdf, wi_np, wo_np, mi.TransportMode.Importance)
     values = np.asarray(run()[0])
-    return run, values, f"mitsuba {mi.__version__} llvm_ad_rgb roughdielectric"
+    return run, values, mitsuba_label(mi, "roughdielectric")
 
 
 def sanity_check(wi_np, wo_np, mitsuba_values, m=4096):

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from _common import best_times, mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_times, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args
 
 BETA_M, BETA_N, ALPHA_DEG, EU = 0.3, 0.3, 2.0, 1.3
 
@@ -78,7 +78,7 @@ def mitsuba_run(wi_np, wo_np):
         dr.eval(v)
         dr.sync_thread()
 
-    return run_eval, f"mitsuba {mi.__version__} llvm_ad_rgb hair"
+    return run_eval, mitsuba_label(mi, "hair")
 
 
 def main():

@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 import time
 
-from _common import best_times, mitsuba_eval_fn, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ALPHA = 0.3
 ETA = 1.5
@@ -62,7 +62,7 @@ def mitsuba_runner(wi_np, wo_np):
                          "specular_reflectance": 1.0})
     run = mitsuba_eval_fn(dr, mi, bsdf, wi_np, wo_np)
     run()  # compile its kernel
-    return run, f"mitsuba {mi.__version__} llvm_ad_rgb ({os.environ.get('DRJIT_LIBLLVM_PATH')})"
+    return run, mitsuba_label(mi, "")
 
 
 def main():

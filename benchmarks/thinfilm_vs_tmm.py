@@ -60,7 +60,8 @@ def main():
     for x64 in (False, True):
         jax.config.update("jax_enable_x64", x64)
         dt = np.float64 if x64 else np.float32
-        c, w = np.cos(th).astype(dt), wl.astype(dt)
+        # on the device once: a numpy argument would be copied to a GPU at every call
+        c, w = jax.device_put(np.cos(th).astype(dt)), jax.device_put(wl.astype(dt))
         film = jax.jit(lambda c, w: (lambda r: (r.R, r.T))(tf.airy(c, w, 900.0, 1.0, 1.56, 1.0)))
         stack = jax.jit(lambda c, w: (lambda r: (r.R, r.T))(tf.multilayer(c, w, stack_n, stack_d)))
         t_film = best(lambda: film(c, w), args.repeats)
@@ -100,7 +101,7 @@ def bsdf_throughput(n, repeats):
         v = rng.normal(size=(3, n))
         v /= np.linalg.norm(v, axis=0)
         v[2] = np.abs(v[2])
-        return Vec3(*v.astype(np.float32))
+        return Vec3(*(jax.device_put(c) for c in v.astype(np.float32)))
 
     wi, wo = hemi(), hemi()
     cases = [

@@ -90,8 +90,12 @@ GRID: dict[str, list[Case]] = {
     # properties hold at any quadrature (tests/bsdf/test_rock_dove.py checks the default's accuracy)
     # gradients: forward mode vs differences in tests/bsdf/test_rock_dove.py, reverse mode finite at the
     # special directions; this check's reverse-mode program takes ~30 s to compile (SLOW_GRID runs it)
+    # chi2: the pdf is discontinuous along the visibility edges, where the adaptive cell cubature
+    # refines to its depth limit without converging; 2 levels instead of 6 change the expected counts
+    # by < 2e-4 of the mass and the p-values from 0.446 to 0.450 at a quarter of the pdf calls
+    # (1.73 M -> 0.47 M, 63 -> 17 s here); the slow grid keeps the default depth
     "rock_dove": [Case("wide_gappy", dict(theta_d=0.3, H=1.8, mu=-0.6, melanin_reflectance=0.3, n_phi=2, n_theta=1),
-                       opts={"skip": ("gradients",)})],
+                       opts={"skip": ("gradients",), "chi2": dict(max_depth=2)})],
     # SGGX specular microflakes (Eq. 4.10, Padrón 2025); dewy2 (alpha 0.002) is too narrow for the
     # harness quadrature and is checked in tests/phase/test_sggx_flakes.py
     "sggx_flakes": [
