@@ -100,13 +100,15 @@ def _float_fields(params):
 
 
 def check_special_directions(model, params, *, dtype=np.float64, key=0, directions=None,
-                             pdf: bool = False) -> SpecialDirectionsResult:
+                             pdf: bool = False, compiler_options: dict | None = None) -> SpecialDirectionsResult:
     """Finite values and gradients (and 0 below the horizon) at the special directions.
 
     ``model``: a record with the fields of :class:`appearance_jax.core.model.Model`;
     ``params`` must broadcast against directions of shape ``(n_pairs,)``. See the module
     docstring for what is checked; ``directions`` replaces :data:`SPECIAL_DIRECTIONS`
     (name -> unit ``(x, y, z)``); ``pdf=True`` also requires a finite ``pdf`` (same pairs).
+    ``compiler_options``: XLA options for the one compiled program (``jax.jit``'s), e.g. to check
+    the code path users get when the process runs with other ``XLA_FLAGS``.
     """
     dtype = np.dtype(dtype)
     if dtype not in (np.float32, np.float64):
@@ -133,7 +135,7 @@ def check_special_directions(model, params, *, dtype=np.float64, key=0, directio
             return jnp.sum(est), (est, se, model.pdf(q, a, b) if has_pdf else None)
 
         # value, pdf and gradient from one compiled function (compilation is most of the cost)
-        value_and_grad = jax.jit(jax.value_and_grad(total, has_aux=True))
+        value_and_grad = jax.jit(jax.value_and_grad(total, has_aux=True), compiler_options=compiler_options)
         (_, (f, se, pd)), grads = value_and_grad(values, wi, wo)
         n = len(names)
         f = np.asarray(f)
