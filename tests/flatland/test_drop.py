@@ -96,8 +96,13 @@ def test_circle_equals_closed_forms(circle):
         # circle follows from the angles of the hit points (its sign changes)
     # the orientation and the sun's inclination are irrelevant for a circle
     g = trace_drop(pc.circle_curve("up"), N_WATER, s=s, families=F, inclination=0.7)
-    for a, b in zip(f, g):
-        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-10)
+    # the grid's ray at s = 1e-16 runs along the symmetry axis: its exit angle (+pi or -pi) and its
+    # axis-crossing count depend on rounding, so it is left out (the closed forms above cover it)
+    off_axis = np.abs(np.asarray(s)) > 1e-9
+    for name, a, b in zip(f._fields, f, g):
+        a, b = np.asarray(a), np.asarray(b)
+        a, b = (a[off_axis], b[off_axis]) if name == "s" else (a[:, off_axis], b[:, off_axis])
+        np.testing.assert_allclose(a, b, atol=1e-10, err_msg=name)
 
 
 def test_circle_hits_equal_closed_form():
