@@ -116,7 +116,7 @@ def mitsuba_variant():
     return os.environ.get("APPEARANCE_JAX_BENCH_MITSUBA", "llvm_ad_rgb")
 
 
-def mitsuba_llvm():
+def mitsuba_peer():
     """``(drjit, mitsuba)`` with the peer variant set (:func:`mitsuba_variant`, ``llvm_ad_rgb``
     unless the environment names another), or ``(None, reason)`` when the peer is unavailable
     (Mitsuba's LLVM backend needs a system libLLVM >= 16, its CUDA backend a GPU driver)."""

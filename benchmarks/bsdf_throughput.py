@@ -28,7 +28,7 @@ from __future__ import annotations
 import os
 import sys
 
-from _common import best_time, best_times, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_time, best_times, mitsuba_label, mitsuba_peer, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ETA = (0.18, 0.45, 1.35)
 K = (3.40, 2.25, 1.80)
@@ -73,7 +73,7 @@ def bench_jax(wi_np, wo_np, repeats, n_devices=1, native=False):
 
 
 def bench_mitsuba(wi_np, wo_np, repeats):
-    dr, mi = mitsuba_llvm()
+    dr, mi = mitsuba_peer()
     if dr is None:
         return None, None, f"{mi}"
     n = wi_np.shape[1]

@@ -25,7 +25,7 @@ import sys
 import time
 
 import numpy as np
-from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_peer, sharded_vec3, throughput_args
 
 ALPHA, INT_IOR, EXT_IOR = 0.3, 1.5, 1.0
 
@@ -79,7 +79,7 @@ def jax_evals(wi_np, wo_np, n_devices, before=False):
 
 def mitsuba_eval(wi_np, wo_np):
     """(callable, values f of the pairs as numpy, version string) or (None, None, reason)."""
-    dr, mi = mitsuba_llvm()
+    dr, mi = mitsuba_peer()
     if dr is None:
         return None, None, f"{mi}"
     bsdf = mi.load_dict({"type": "roughdielectric", "distribution": "ggx", "alpha": ALPHA,

@@ -21,7 +21,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from _common import best_times, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args
+from _common import best_times, mitsuba_label, mitsuba_peer, sharded_vec3, throughput_args
 
 BETA_M, BETA_N, ALPHA_DEG, EU = 0.3, 0.3, 2.0, 1.3
 
@@ -61,7 +61,7 @@ def jax_runs(wi_np, wo_np, n_devices, grad=False):
 
 
 def mitsuba_run(wi_np, wo_np):
-    dr, mi = mitsuba_llvm()
+    dr, mi = mitsuba_peer()
     if dr is None:
         return None, f"{mi}"
     n = wi_np.shape[1]

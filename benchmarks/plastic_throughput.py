@@ -23,7 +23,7 @@ from __future__ import annotations
 import os
 import time
 
-from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_llvm, sharded_vec3, throughput_args, upper_hemisphere_pairs
+from _common import best_times, mitsuba_eval_fn, mitsuba_label, mitsuba_peer, sharded_vec3, throughput_args, upper_hemisphere_pairs
 
 ALPHA = 0.3
 ETA = 1.5
@@ -53,7 +53,7 @@ def jax_runners(wi_np, wo_np, n_devices):
 
 
 def mitsuba_runner(wi_np, wo_np):
-    dr, mi = mitsuba_llvm()
+    dr, mi = mitsuba_peer()
     if dr is None:
         return None, f"{mi}"
     bsdf = mi.load_dict({"type": "roughplastic", "distribution": "ggx", "alpha": ALPHA, "int_ior": ETA,

@@ -27,12 +27,21 @@ def _xla_knows(flag):
         return False
 
 
-if (os.environ.get("APPEARANCE_JAX_TEST_XLA_DEFAULT") != "1"
-        and LEGACY_EMITTERS not in os.environ.get("XLA_FLAGS", "") and _xla_knows(LEGACY_EMITTERS)):
-    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {LEGACY_EMITTERS}".strip()
+if os.environ.get("APPEARANCE_JAX_TEST_XLA_DEFAULT") != "1" and LEGACY_EMITTERS not in os.environ.get("XLA_FLAGS", ""):
+    if _xla_knows(LEGACY_EMITTERS):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {LEGACY_EMITTERS}".strip()
+    else:  # the workers inherit the decision instead of probing again
+        os.environ["APPEARANCE_JAX_TEST_XLA_DEFAULT"] = "1"
 
 import jax  # noqa: E402
 import pytest  # noqa: E402
+
+
+@pytest.fixture(scope="session")
+def user_compiler_options():
+    """``compiler_options`` for a ``jax.jit`` that must compile as users' programs do: the default
+    fusion emitters when this run uses the legacy ones, else None."""
+    return {"xla_cpu_use_fusion_emitters": True} if LEGACY_EMITTERS in os.environ.get("XLA_FLAGS", "") else None
 
 jax.config.update("jax_enable_x64", True)
 

@@ -4,8 +4,6 @@ reflection BSDFs, finite gradients w.r.t. every floating-point field; float32 an
 (appearance_jax.testing.check_special_directions). Expensive models run with small static
 sample counts (the singular directions do not depend on them), and their float32 case is slow."""
 
-import os
-
 import numpy as np
 import pytest
 
@@ -37,18 +35,14 @@ CASES = [pytest.param(name, dtype, id=f"{name}-{dtype}",
          for name in sorted(MODELS) for dtype in ("float32", "float64")]
 
 
-# tests/conftest.py runs the suite with XLA:CPU's legacy fusion emitters (faster to compile); this
-# check looks for NaN and infinities that depend on how the compiler fuses and contracts the
-# arithmetic, so it compiles with the emitters users get (XLA's default)
-USER_EMITTERS = ({"xla_cpu_use_fusion_emitters": True}
-                 if "--xla_cpu_use_fusion_emitters=false" in os.environ.get("XLA_FLAGS", "") else None)
-
-
 @pytest.mark.parametrize("name,dtype", CASES)
-def test_special_directions(name, dtype):
+def test_special_directions(name, dtype, user_compiler_options):
+    # tests/conftest.py runs the suite with XLA:CPU's legacy fusion emitters (faster to compile); this
+    # check looks for NaN and infinities that depend on how the compiler fuses and contracts the
+    # arithmetic, so it compiles with the emitters users get (XLA's default)
     model = MODELS[name]
     testing.assert_special_directions(model, model.Params(**CHEAP.get(name, {})), dtype=dtype,
-                                      compiler_options=USER_EMITTERS)
+                                      compiler_options=user_compiler_options)
 
 
 def test_the_check_catches_nan_gradients_and_light_from_below():
