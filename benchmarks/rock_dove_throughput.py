@@ -7,7 +7,8 @@ peer is our own ``iridescent`` (a microfacet BRDF with the same keratin film, d 
 thesis renders its feathers 2.1x slower than plain thin films [T:1760]. Timed on ``--n`` random
 upper-hemisphere pairs, float32, one JAX CPU device, best of ``--repeats`` after a warm-up whose
 time (trace + compile + first run) is printed: ``rock_dove.eval`` at its default rho quadrature
-(12 x 2 nodes) and at 4 x 2, ``rock_dove.sample_lobes`` (Huang's Algorithm 1: one estimator of
+(12 x 2 nodes) and at 4 x 2, ``rock_dove_stochastic.eval`` (Huang's one-draw TRT, the thesis'
+evaluation), ``rock_dove.reflection_geometry`` (S_R without the film, no TRT), ``rock_dove.sample_lobes`` (Huang's Algorithm 1: one estimator of
 the whole BSDF, no quadrature), ``rock_dove.transmission``, and ``iridescent.eval``.
 Not a test: nothing here asserts a time.
 """
@@ -46,7 +47,7 @@ def main():
     import jax
     import jax.numpy as jnp
 
-    from appearance_jax.bsdf import iridescent, rock_dove
+    from appearance_jax.bsdf import iridescent, rock_dove, rock_dove_stochastic
     from appearance_jax.core.vec import Vec3
 
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores, jax {jax.__version__}, "
@@ -58,6 +59,10 @@ def main():
     cases = [
         ("rock_dove.eval (rho 12 x 2)", lambda: rock_dove.eval(p, wi, wo).block_until_ready()),
         ("rock_dove.eval (rho 4 x 2)", lambda: rock_dove.eval(p.replace(n_phi=4), wi, wo).block_until_ready()),
+        ("rock_dove_stochastic.eval (one-draw TRT)",
+         lambda: rock_dove_stochastic.eval(p, wi, wo, key).block_until_ready()),
+        ("rock_dove.reflection_geometry (S_R / I_R)",
+         lambda: rock_dove.reflection_geometry(p, wi, wo).block_until_ready()),
         ("rock_dove.sample_lobes (Algorithm 1)", lambda: rock_dove.sample_lobes(p, wi, key)[1].block_until_ready()),
         ("rock_dove.transmission", lambda: rock_dove.transmission(p, wi).block_until_ready()),
         ("iridescent.eval (same film)", lambda: iridescent.eval(

@@ -21,7 +21,8 @@ normal w_m faces w_i and w_o and its rays towards both miss the neighbouring bar
 transmittance at w_i times the melanin reflectance times its transmittance at w_o
 (:func:`~appearance_jax.optics.thinfilm.airy_trt`).
 
-rho is computed deterministically (the thesis draws one random (h, l) per evaluation): the
+rho is computed deterministically (the thesis draws one random (h, l) per evaluation:
+:mod:`~appearance_jax.bsdf.rock_dove_stochastic`; S_R without the film: :func:`reflection_geometry`): the
 lit area seen from w_i is weighted exactly by the visible-normal measure
 ``D <w_i, w_m> dw_m / <w_i, n>`` (what Huang's uniform offsets h, l stand for), restricted to
 points that also see w_o: ``n_phi`` smoothstep-Gauss nodes in the offset h over each interval
@@ -85,7 +86,7 @@ import numpy as np
 
 from ..core import spectral
 from ..core.model import Model, boundary, with_bands
-from ..core.params import Real, param, params_class, static
+from ..core.params import Real, integer, param, params_class, static
 from ..core.quadrature import gauss_legendre, smoothstep_rule
 from ..core.rng import uniforms
 from ..core.special import atan2, safe_asin, safe_sqrt
@@ -94,14 +95,6 @@ from ..core.vec import Vec3
 from ..core import warp
 from ..optics.thinfilm import airy, airy_trt
 from . import barbule_row as row
-
-
-def _positive_int(name):
-    def convert(v):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
-            raise ValueError(f"{name} = {v!r}: must be an int >= 1")
-        return int(v)
-    return convert
 
 
 @params_class
@@ -121,10 +114,10 @@ class Params:
     color: str = static("rgb3", choices=spectral.COLOR_MODES, doc="output bands: rgb3, cie (linear sRGB), spectral")
     wavelengths: tuple = static(spectral.RGB_WAVELENGTHS, convert=spectral.wavelengths_tuple,
                                 doc="wavelengths (nm) of color='spectral'")
-    neighbours: int = static(2, convert=_positive_int("rock_dove.Params.neighbours"),
+    neighbours: int = static(2, convert=integer(1),
                              doc="neighbour barbules tested on each side")
-    n_phi: int = static(12, convert=_positive_int("rock_dove.Params.n_phi"), doc="rho: nodes per arc piece")
-    n_theta: int = static(2, convert=_positive_int("rock_dove.Params.n_theta"), doc="rho: nodes over theta_m")
+    n_phi: int = static(12, convert=integer(1), doc="rho: nodes per arc piece")
+    n_theta: int = static(2, convert=integer(1), doc="rho: nodes over theta_m")
 
     def _validate(self):
         p0, p1 = np.asarray(self.phi0, np.float64), np.asarray(self.phi1, np.float64)
@@ -238,8 +231,9 @@ def valid_fraction(p: Params, w: Vec3):
 # --------------------------------------------------------------------------------------
 
 
-def _s_r(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
-    """S_R (Huang Eq. 5.14), bands last; wi, wo above the barb plane (local), bi, bo in the barbule frame."""
+def _s_r_geometry(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
+    """S_R / I_R = D G / (4 <w_i, n> <w_o, n>) and the facet cosine; wi, wo above the barb plane
+    (local), bi, bo in the barbule frame."""
     h = V.normalize(bi + bo)
     theta_m = safe_asin(h.y)
     phi_m = atan2(h.x, h.z)
@@ -250,8 +244,21 @@ def _s_r(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
     d = jnp.where(g, ndf(p, theta_m, phi_m), 0.0)
     denom = 4.0 * wi.z * wo.z
     ok = denom > 0
-    scale = jnp.where(ok, d / jnp.where(ok, denom, 1.0), 0.0)
+    return jnp.where(ok, d / jnp.where(ok, denom, 1.0), 0.0), cos_b
+
+
+def _s_r(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
+    """S_R (Huang Eq. 5.14), bands last."""
+    scale, cos_b = _s_r_geometry(p, wi, wo, bi, bo)
     return with_bands(scale) * film_r(p, cos_b)
+
+
+def _reflection_geometry(p: Params, wi: Vec3, wo: Vec3):
+    """S_R with I_R = 1 (1/sr, shape of ``wi.z``): the film-free mirror lobe D G / (4 <w_i, n> <w_o, n>),
+    what a flatland trace of mirror-reflecting arcs measures (flatland.feather)."""
+    p = _arc_within_pi(p)
+    ok = (wi.z > 0) & (wo.z > 0)
+    return jnp.where(ok, _s_r_geometry(p, wi, wo, to_barbule(p, wi), to_barbule(p, wo))[0], 0.0)
 
 
 # maximal runs of lit arc kept per direction for rho: the lit set is the facing part of the arc
@@ -475,6 +482,7 @@ pdf = boundary(_pdf, Params)
 sample = boundary(_sample, Params)
 transmission = boundary(_transmission, Params)
 sample_lobes = boundary(_sample_lobes, Params)
+reflection_geometry = boundary(_reflection_geometry, Params)
 
 # Huang's hand fit to the scatterograms [T:1746] and the five one-parameter ablations of
 # App. H, Fig. H.1 [T:2291]; everything else at the defaults.

@@ -12,6 +12,9 @@ drop and barbule models (spec seed-001 §4, seed-000 §5 and M22, seed-002 §1.2
 - :mod:`.polar_curve`, :mod:`.drop`: water drops (a circle or the Beard–Chuang meridian,
   Sadeghi Eq. 3.1) and the deterministic fan tracer :func:`trace_drop` returning a
   :class:`Fan` (:mod:`.fan`: amplitudes, optical paths, foci and axis counts per path family).
+- :mod:`.feather`: the feather mode, a row of rock-dove barbule arcs with a random longitudinal
+  tilt per hit (:func:`barbule_row`, :func:`feather_histogram`), the reference of
+  :mod:`appearance_jax.bsdf.rock_dove`.
 - :mod:`.farfield`: far-field collectors of a fan (coherent, incoherent, KDE; cylinder and
   axisymmetric sphere lifts): :func:`far_field`, :func:`far_field_amplitude`,
   :func:`family_energy`.
@@ -26,3 +29,4 @@ from .fan import Fan
 from .polar_curve import PolarCurve, beard_chuang, beard_chuang_coefficients, circle_curve, cosine_series
 from .drop import impact_grid, trace_drop
 from .farfield import far_field, far_field_amplitude, family_energy
+from .feather import FeatherHistogram, barbule_row, feather_histogram

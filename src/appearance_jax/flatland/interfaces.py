@@ -140,6 +140,51 @@ def diffuse(d: Vec3, n_out: Vec3, from_outside, u1, u2):
     return frame.to_world(square_to_cosine_hemisphere(u1, u2))
 
 
+def barbule(d: Vec3, n_out: Vec3, from_outside, itf, u_theta, u1, u2):
+    """A rock-dove barbule's surface in the feather mode (spec seed-001 §4.3 item 8, Huang Ch. 5).
+
+    The section's arc carries a longitudinal circular arc of half-angle theta_d = ``itf.tilt``
+    (the saddle cell): the ray lands at a uniform position along it, so the normal is the in-plane
+    normal tilted by theta = theta_d (2 u_theta - 1) along the axis. A hit's power factor is the
+    flux that element receives per unit axis length relative to an untilted one,
+    (theta_d / sin theta_d) <w_i, m> / <w_i, n> (the arc is theta_d / sin theta_d longer than its
+    projection), 0 where m faces away. Children, both on the incident side:
+    - reflected: the mirror direction about m, times the film's Airy R (kind ``"barbule"``; film
+      ``film_nm`` of index ``film_eta`` in air at ``wavelength_nm``) or ``albedo`` (kind
+      ``"saddle_mirror"``, e.g. 1: the film-free geometry);
+    - "transmitted" slot = TRT (kind ``"barbule"`` only): one Lambertian bounce on the melanin
+      under the film, cosine-distributed about m, times I_TRT (Huang Eq. 5.3) with the melanin
+      reflectance ``albedo``.
+    Children leaving into the barbule (behind the in-plane normal) and hits on an arc's inner
+    side are killed (both sides of a barbule are opaque). Returns (d_r, g_r, d_t, g_t), g per band.
+    """
+    from ..optics.thinfilm import airy, airy_trt
+
+    theta_d = itf.tilt
+    m = fiber.meso_normal(n_out.y, n_out.z, theta_d * (2.0 * u_theta - 1.0))
+    wi = -d
+    cos_n = V.dot(wi, n_out)
+    cos_m = V.dot(wi, m)
+    ok = from_outside & (cos_n > 0) & (cos_m > 0)
+    weight = jnp.where(ok, theta_d / jnp.sin(theta_d) * cos_m / jnp.where(ok, cos_n, 1.0), 0.0)
+    cm = jnp.clip(cos_m, 0.0, 1.0)[..., None]
+    d_r = reflect(wi, m)
+    ok_r = ok & (V.dot(d_r, n_out) > 0)
+    one = jnp.ones((), cm.dtype)
+    if itf.kind == "saddle_mirror":
+        g_r = jnp.where(ok_r, weight, 0.0)[..., None] * jnp.atleast_1d(itf.albedo)
+        return d_r, g_r, d, jnp.zeros_like(g_r)
+    g_r = jnp.where(ok_r, weight, 0.0)[..., None] * airy(cm, itf.wavelength_nm, itf.film_nm, one, itf.film_eta,
+                                                          one).R
+    frame = Frame.from_normal_tangent(m, Vec3(jnp.ones_like(d.x), jnp.zeros_like(d.x), jnp.zeros_like(d.x)))
+    d_t = frame.to_world(square_to_cosine_hemisphere(u1, u2))
+    ok_t = ok & (V.dot(d_t, n_out) > 0)
+    co = jnp.clip(V.dot(d_t, m), 0.0, 1.0)[..., None]
+    g_t = jnp.where(ok_t, weight, 0.0)[..., None] * airy_trt(cm, co, itf.wavelength_nm, itf.film_nm, itf.film_eta,
+                                                              itf.albedo)
+    return d_r, g_r, d_t, g_t
+
+
 def _abs2(E: Vec3):
     return sum(jnp.real(c) ** 2 + jnp.imag(c) ** 2 for c in E)
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from ..core.params import check_value, ParamSpec
 
-INTERFACE_KINDS = ("dielectric", "diffuse", "film", "absorber")
+INTERFACE_KINDS = ("dielectric", "diffuse", "film", "absorber", "barbule", "saddle_mirror")
 DISTRIBUTIONS = ("ggx", "beckmann")
 
 
@@ -60,6 +60,12 @@ class Interface:
         ray is reflected into the side it came from, cosine-distributed about the normal
         (a diffuse medulla, Padrón 2025 Ch. 5).
       - ``"absorber"``: an opaque black surface (the ray ends).
+      - ``"barbule"``, ``"saddle_mirror"``: a rock-dove barbule (the feather mode,
+        :mod:`appearance_jax.flatland.feather`): the normal tilted at random along the axis within
+        +-``tilt`` (the half-angle theta_d of the barbule's longitudinal arc), a film-coated
+        (``barbule``: Airy R, TRT = one Lambertian bounce on a melanin layer of reflectance
+        ``albedo``) or plain mirror (``saddle_mirror``: reflectance ``albedo``) surface, opaque
+        (:func:`~appearance_jax.flatland.interfaces.barbule`).
     distribution (static): microfacet distribution of rough dielectrics, ``ggx`` or
       ``beckmann``.
 
@@ -220,8 +226,8 @@ class Section:
                 raise ValueError(f"{lab}.interface.distribution = {itf.distribution!r}; "
                                  f"valid: {DISTRIBUTIONS}")
             check_value(f"{lab}.interface.roughness", itf.roughness, ParamSpec(0.0, 1.0))
-            check_value(f"{lab}.interface.tilt", itf.tilt,
-                        ParamSpec(-math.pi / 2, math.pi / 2, True, True, "rad"))
+            lo_tilt = 0.0 if itf.kind in ("barbule", "saddle_mirror") else -math.pi / 2  # theta_d > 0 there
+            check_value(f"{lab}.interface.tilt", itf.tilt, ParamSpec(lo_tilt, math.pi / 2, True, True, "rad"))
             check_value(f"{lab}.interface.albedo", itf.albedo, ParamSpec(0.0, 1.0))
             check_value(f"{lab}.interface.film_nm", itf.film_nm, ParamSpec(0.0, math.inf, unit="nm"))
             check_value(f"{lab}.interface.wavelength_nm", itf.wavelength_nm,

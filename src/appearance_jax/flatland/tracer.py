@@ -72,9 +72,9 @@ def n_bands(section: Section) -> int:
         sizes.append(jnp.size(m.sigma_a))
     for s in section.shapes:
         itf = s.interface
-        if itf.kind == "diffuse":
+        if itf.kind in ("diffuse", "barbule", "saddle_mirror"):
             sizes.append(jnp.size(itf.albedo))
-        if itf.kind == "film":
+        if itf.kind in ("film", "barbule"):
             sizes.append(jnp.size(itf.wavelength_nm))
     return int(max(sizes))
 
@@ -125,7 +125,7 @@ def _select_vec(idx, vecs):
 
 
 def _event_uniforms(key, shape, dtype, needed):
-    """The five uniforms of an event (microfacet 2, choice 1, diffuse 2); slots the section
+    """The five uniforms of an event (microfacet 2 or barbule tilt 1, choice 1, diffuse 2); slots the section
     never uses are constants, so a smooth fiber in split mode draws no random numbers."""
     keys = jax.random.split(key, 5)
     half = jnp.full(shape, 0.5, dtype)
@@ -134,12 +134,13 @@ def _event_uniforms(key, shape, dtype, needed):
 
 def _uniforms_needed(section, mode):
     rough = any(s.interface.kind == "dielectric" and s.interface.rough for s in section.shapes)
-    diffuse = any(s.interface.kind == "diffuse" for s in section.shapes)
+    tilted = any(s.interface.kind in ("barbule", "saddle_mirror") for s in section.shapes)
+    diffuse = any(s.interface.kind in ("diffuse", "barbule") for s in section.shapes)
     # split mode still chooses at interfaces between two interior regions
     interior = any(s.inside != 0 and s.outside != 0 and s.interface.kind in ("dielectric", "film")
                    for s in section.shapes)
     choice = mode != "split" or interior
-    return (rough, rough, choice, diffuse, diffuse)
+    return (rough or tilted, rough, choice, diffuse, diffuse)
 
 
 @partial(jax.jit, static_argnames=("max_events", "mode", "wave", "polarized", "nee"))
@@ -232,6 +233,12 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
             elif itf.kind == "film":
                 d_r, g_r, d_t, g_t, E_r, E_t = I.film(dd, n_out, from_out, e1, e2, itf, polarized, f.get("E"))
                 g_r, g_t = jnp.broadcast_to(g_r, (N, nb)), jnp.broadcast_to(g_t, (N, nb))
+            elif itf.kind in ("barbule", "saddle_mirror"):
+                if polarized:
+                    raise ValueError("flatland.trace: polarized=True cannot pass a barbule (diffuse TRT)")
+                d_r, g_r, d_t, g_t = I.barbule(dd, n_out, from_out, itf, u[0], u[3], u[4])
+                g_r, g_t = jnp.broadcast_to(g_r, (N, nb)), jnp.broadcast_to(g_t, (N, nb))
+                E_r = E_t = None
             elif itf.kind == "diffuse":
                 if polarized:
                     raise ValueError("flatland.trace: polarized=True cannot pass a diffuse "
@@ -251,7 +258,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         g_t = _select(sid[:, None], [c[3] for c in children])
         reg_r = _select(sid, [c[4] for c in children])
         reg_t = _select(sid, [c[5] for c in children])
-        opaque = _select(sid, [jnp.asarray(c[8] in ("diffuse", "absorber")) for c in children])
+        opaque = _select(sid, [jnp.asarray(c[8] in ("diffuse", "absorber", "barbule", "saddle_mirror")) for c in children])
         if polarized:
             E_r = _select_vec(sid, [c[6] for c in children])
             E_t = _select_vec(sid, [c[7] for c in children])
