@@ -14,6 +14,7 @@ from appearance_jax.bsdf import rock_dove_stochastic as rs
 from appearance_jax.core.frame import spherical_direction
 from appearance_jax.core.vec import Vec3
 from appearance_jax.flatland import feather, fiber
+from appearance_jax.testing.directions import call_chunked
 
 N_PATHS = 2 ** 16
 
@@ -91,7 +92,8 @@ def test_stochastic_trt_is_unbiased_for_the_quadrature():
     wi = Vec3(*(jnp.asarray(v) for v in (np.sin(th_i) * np.cos(ph_i), np.sin(th_i) * np.sin(ph_i), np.cos(th_i))))
     wo = Vec3(*(jnp.asarray(v) for v in (np.sin(th_o) * np.cos(ph_o), np.sin(th_o) * np.sin(ph_o), np.cos(th_o))))
     fine = np.asarray(rd.eval(rd.Params(n_phi=48, n_theta=8), wi, wo))
-    s_r = np.asarray(rs.eval(rd.Params(melanin_reflectance=0.0), wi, wo, jax.random.PRNGKey(0)))
+    # S_R (no melanin: no TRT) on the property harness' compiled eval (tests/bsdf/test_rock_dove.py)
+    s_r = call_chunked(rd.eval, rd.Params(melanin_reflectance=0.0, n_phi=2, n_theta=1), wi, wo)
     det = fine - s_r  # the quadrature's S_TRT
     n = 4096
     rep = lambda w: Vec3(*(jnp.repeat(c, n) for c in w))  # noqa: E731
@@ -100,10 +102,11 @@ def test_stochastic_trt_is_unbiased_for_the_quadrature():
     assert np.all(det > 1e-3)  # every pair has a TRT
     z = (mean - det) / se
     assert np.max(np.abs(z)) < 4.5 and np.mean(z ** 2) < 1.0 + 5.0 * math.sqrt(2.0 / z.size)
-    # one key gives one value; another key another
-    a = np.asarray(rs.trt(rd.Params(), wi, wo, jax.random.PRNGKey(2)))
-    np.testing.assert_array_equal(a, np.asarray(rs.trt(rd.Params(), wi, wo, jax.random.PRNGKey(2))))
-    assert not np.array_equal(a, np.asarray(rs.trt(rd.Params(), wi, wo, jax.random.PRNGKey(3))))
+    # one key gives one value (the same compiled program again), another key another
+    again = np.asarray(rs.trt(rd.Params(), rep(wi), rep(wo), jax.random.PRNGKey(1))).reshape(6, n, 3)
+    np.testing.assert_array_equal(draws, again)
+    other = np.asarray(rs.trt(rd.Params(), rep(wi), rep(wo), jax.random.PRNGKey(2))).reshape(6, n, 3)
+    assert not np.array_equal(draws, other)
 
 
 def test_stochastic_eval_edges_are_finite_zero():
