@@ -93,3 +93,98 @@ def test_edges_are_finite():
 def test_bad_parameters_are_named(kw, match):
     with pytest.raises(ValueError, match=match):
         fm.barbule_masking(0.3, 0.9, **kw)
+
+
+# ------------------------------------------------------------------------------ barb masking (M24)
+
+def _brute_barb(wx, wy, e_b, l_bb, theta, w_bp, w_bd, corner=1, n=40000, copies=12):
+    """Dense rays over one period, each intersected with 2 copies + 1 barbs and barbule segments
+    (numpy: circle-like quadratic and segment crossings written here) and composited front to back."""
+    r = math.hypot(wx, wy)
+    dx, dy = wx / r, wy / r
+    X = 1 + 2 * l_bb * math.cos(theta)
+    cy = corner * l_bb * math.sin(theta)
+    s = ((np.arange(n) + 0.5) / n - 0.5) * X * abs(dy)  # one projected period, centred
+    ox, oy = s * dy + 50 * dx, -s * dx + 50 * dy         # far towards the viewer
+    hits = []                                             # (travel distance, coverage, kind)
+    for k in range(-copies, copies + 1):
+        cx = k * X
+        # barb: (x - cx)^2 / a^2 + y^2 / b^2 = 1 along o - t d
+        a, b = 0.5, 0.5 * e_b
+        px, py = ox - cx, oy
+        A = dx * dx / a ** 2 + dy * dy / b ** 2
+        B = -2 * (px * dx / a ** 2 + py * dy / b ** 2)
+        C = px * px / a ** 2 + py * py / b ** 2 - 1
+        disc = B * B - 4 * A * C
+        t = np.where(disc > 0, (-B - np.sqrt(np.maximum(disc, 0))) / (2 * A), np.inf)
+        hits.append((t, np.ones(n), 0))
+        for (x0, y0), (x1, y1), cov, kind in (((cx + 0.5, 0.0), (cx + X / 2, cy), w_bp, 1),
+                                              ((cx + X / 2, cy), (cx + X - 0.5, 0.0), w_bd, 2)):
+            ex, ey = x1 - x0, y1 - y0
+            den = dx * ey - dy * ex  # solve t d + u e = o - p0 (Cramer)
+            rx, ry = x0 - ox, y0 - oy
+            tt = (-rx * ey + ry * ex) / den
+            u = (-dx * ry + dy * rx) / den
+            hits.append((np.where((u > 0) & (u < 1) & (tt > 0), tt, np.inf), np.full(n, cov), kind))
+    T = np.stack([h[0] for h in hits])
+    cov = np.stack([h[1] for h in hits])
+    kind = np.array([h[2] for h in hits])
+    order = np.argsort(T, axis=0)
+    T, cov, kind = np.take_along_axis(T, order, 0), np.take_along_axis(cov, order, 0), kind[order]
+    cov = np.where(np.isfinite(T), cov, 0.0)
+    trans = np.cumprod(1 - cov, axis=0)
+    before = np.vstack([np.ones((1, n)), trans[:-1]])
+    seen = before * cov
+    return [float(np.mean(np.sum(np.where(kind == j, seen, 0), 0))) for j in range(3)] + [float(np.mean(trans[-1]))]
+
+
+@pytest.mark.parametrize("psi_deg, e_b, l_bb, theta_deg, w_bp, w_bd, corner", [
+    (0.0, 1.0, 1.0, 30.0, 0.6, 0.6, 1), (35.0, 1.0, 1.0, 30.0, 0.6, 0.3, 1), (-50.0, 2.0, 0.7, 45.0, 0.9, 0.5, 1),
+    (65.0, 1.0, 1.5, 20.0, 0.4, 0.8, -1), (110.0, 1.0, 1.0, 30.0, 0.6, 0.6, 1)])
+def test_barb_weights_are_the_dense_ray_composite(psi_deg, e_b, l_bb, theta_deg, w_bp, w_bd, corner):
+    psi, theta = math.radians(psi_deg), math.radians(theta_deg)
+    out = [float(v) for v in fm.barb_masking(math.sin(psi), math.cos(psi), e_b, l_bb, theta, w_bp, w_bd,
+                                             corner=corner)]
+    ref = _brute_barb(math.sin(psi), math.cos(psi), e_b, l_bb, theta, w_bp, w_bd, corner)
+    assert sum(out[:4]) == pytest.approx(1.0, abs=1e-12)
+    np.testing.assert_allclose(out[:4], ref, atol=2e-4)  # the dense rays resolve 1/40000 per edge
+
+
+def test_barb_masking_closed_forms_and_trends():
+    th = math.radians(30.0)
+    X = 1 + 2 * math.cos(th)
+    # transparent barbules: the barb row alone, w_b = min(1, W / (X cos psi))
+    for psi in np.radians([0.0, 30.0, 60.0]):
+        w_b, w_bp, w_bd, w_t, _, _ = (float(v) for v in fm.barb_masking(math.sin(psi), math.cos(psi), 1.5, 1.0, th,
+                                                                         0.0, 0.0))
+        W = 2 * math.sqrt(0.25 * math.cos(psi) ** 2 + 0.5625 * math.sin(psi) ** 2)
+        assert w_b == pytest.approx(min(1.0, W / (X * math.cos(psi))), rel=1e-12) and w_bp == w_bd == 0.0
+    # opaque barbules at the normal view close every gap; 1/X of the period is barb
+    w_b, w_bp, w_bd, w_t, _, _ = (float(v) for v in fm.barb_masking(0.0, 1.0, 1.0, 1.0, th, 1.0, 1.0))
+    assert w_t == pytest.approx(0.0, abs=1e-14) and w_b == pytest.approx(1 / X, rel=1e-12)
+    assert w_bp == pytest.approx(w_bd, rel=1e-12)
+    # the symmetric V seen from -psi swaps proximal and distal (spec Q-F8's mirror)
+    a = [float(v) for v in fm.barb_masking(math.sin(0.4), math.cos(0.4), 1.0, 1.0, th, 0.7, 0.3)]
+    b = [float(v) for v in fm.barb_masking(-math.sin(0.4), math.cos(0.4), 1.0, 1.0, th, 0.3, 0.7)]
+    np.testing.assert_allclose([a[0], a[1], a[2], a[3]], [b[0], b[2], b[1], b[3]], rtol=1e-12)
+    # Q-F9: wider barbule gaps (smaller w'_bb in the barbules' frame) let more light through the vane
+    w_wide = float(fm.barbule_masking(0.3, 0.95, 1.0, 2.0)[0])
+    w_narrow = float(fm.barbule_masking(0.3, 0.95, 1.0, 0.5)[0])
+    t = [float(fm.barb_masking(0.3, 0.95, 1.0, 1.0, th, w, w)[3]) for w in (w_narrow, w_wide)]
+    assert w_wide < w_narrow and t[1] > t[0]
+
+
+def test_barb_masking_edges_and_bad_input():
+    out = [np.asarray(v) for v in fm.barb_masking(jnp.asarray([0.0, 1.0, 0.0]), jnp.asarray([0.0, 0.0, -1.0]), 1.0,
+                                                  1.0, 0.5, 0.6, 0.6)]
+    assert all(np.all(np.isfinite(v)) for v in out)
+    np.testing.assert_allclose(sum(out[:4]), 1.0, rtol=1e-12)
+    assert out[0][1] == 1.0  # in the vane plane the barbs cover everything
+    for kw, match in ((dict(e_b=0.0), "e_b = 0.0"), (dict(l_bb=-1.0), "l_bb = -1.0"), (dict(w_bp=1.5), "w_bp = 1.5"),
+                      (dict(theta_bb=1.6), "theta_bb = 1.6"), (dict(corner=0), "corner = 0")):
+        args = dict(e_b=1.0, l_bb=1.0, theta_bb=0.5, w_bp=0.5, w_bd=0.5)
+        args.update(kw)
+        corner = args.pop("corner", 1)
+        with pytest.raises(ValueError, match=match):
+            fm.barb_masking(0.3, 0.9, args["e_b"], args["l_bb"], args["theta_bb"], args["w_bp"], args["w_bd"],
+                            corner=corner)

@@ -80,3 +80,111 @@ def barbule_masking(wx, wy, e_bb, delta_bb):
     h_lo = jnp.where(cut_high, -1.0, 1.0 - visible)
     h_hi = jnp.where(cut_high, -1.0 + visible, 1.0)
     return w, h_lo, h_hi
+
+
+# --------------------------------------------------------------------------------------
+# Barb masking (large scale)
+# --------------------------------------------------------------------------------------
+
+#: barb copies on each side of the central one that a view ray is tested against (enough unless the
+#: view is within a few degrees of the vane plane; see :func:`barb_masking`)
+BARB_COPIES = 6
+
+
+def _ellipse_hit(m, dx, dy, cx, a, b):
+    """The depth of the entry (nearest the viewer) of the view ray at screen coordinate m into the
+    ellipse centred at (cx, 0) with semi-axes (a, b), and whether it hits. The ray: m (dy, -dx) + t (dx, dy)."""
+    px, py = m * dy - cx, -m * dx
+    A = dx * dx / (a * a) + dy * dy / (b * b)
+    B = 2.0 * (px * dx / (a * a) + py * dy / (b * b))
+    C = px * px / (a * a) + py * py / (b * b) - 1.0
+    disc = B * B - 4.0 * A * C
+    t = (-B + safe_sqrt(disc)) / (2.0 * A)  # the larger root: nearest the viewer
+    return t + cx * dx, disc > 0  # depth = position . (dx, dy)
+
+
+def _segment_hit(m, dx, dy, p, q):
+    """Depth where the view ray at screen coordinate m crosses the segment p-q, and whether it does."""
+    sp, sq = p[0] * dy - p[1] * dx, q[0] * dy - q[1] * dx
+    dp, dq = p[0] * dx + p[1] * dy, q[0] * dx + q[1] * dy
+    ds = sq - sp
+    f = jnp.where(ds != 0, (m - sp) / jnp.where(ds != 0, ds, 1.0), -1.0)
+    return dp + f * (dq - dp), (f > 0) & (f < 1)
+
+
+def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, copies: int = BARB_COPIES):
+    """Barb masking (Padrón App. B.2.2, B.14-B.18; spec seed-000 M24, layout D9), exactly.
+
+    In the barb cross-section (x across the vane, y its normal) barb k is an opaque ellipse centred
+    at (k X, 0) with semi-axes (1/2, e_b / 2); its proximal barbules are the segment from (k X + 1/2, 0)
+    to the corner c = (k X + X / 2, corner l_bb sin theta_bb) and the next barb's distal barbules the
+    segment from c to ((k + 1) X - 1/2, 0), X = 1 + 2 l_bb cos theta_bb (``corner`` = +1: a V opening
+    towards +y, -1: inverted). A barbule segment covers the fraction ``w_bp`` / ``w_bd`` of what is
+    behind it (the barbule masking w'_bb of its own frame, :func:`barbule_masking`).
+
+    Returns ``(w_b, w_bp, w_bd, w_t, h_lo, h_hi)``: the fractions of the projected period (sum 1) where
+    the viewer along (wx, wy) sees a barb, a proximal barbule, a distal one, or through the vane; and
+    the visible offset range of a barb's diameter, barbule occlusion ignored as in [T:1369]
+    (:func:`barbule_masking` of the barb row). Where Padrón casts rays case by case and approximates the
+    barbules' repeated occlusion at grazing views by one ([T:1371]), this cuts one period of the
+    screen line at every silhouette and segment end of ``copies`` neighbours on each side, and
+    composites front to back on each piece (the order is constant there): exact up to views so close
+    to the vane plane that a ray crosses more than ``copies`` periods (|wy| / |wx| < ~ (1 + e_b) /
+    (2 copies X)). Branch-free; (wx, wy) scalars or arrays.
+    """
+    _check("e_b", e_b, 0.0, True)
+    _check("l_bb", l_bb, 0.0, False)
+    for name, v in (("w_bp", w_bp), ("w_bd", w_bd)):
+        _check(name, v, 0.0, False)
+        if not isinstance(v, jax.core.Tracer) and np.any(np.asarray(v, float) > 1):
+            raise ValueError(f"feather_masking.barb_masking: {name} = {v!r}: valid range [0, 1]")
+    if not isinstance(theta_bb, jax.core.Tracer) and not 0 <= float(theta_bb) < 0.5 * np.pi:
+        raise ValueError(f"feather_masking.barb_masking: theta_bb = {theta_bb!r} rad: valid range [0, pi/2)")
+    if corner not in (1, -1):
+        raise ValueError(f"feather_masking.barb_masking: corner = {corner!r}: +1 or -1")
+    f = jnp.result_type(float)
+    wx, wy = jnp.broadcast_arrays(jnp.asarray(wx, f), jnp.asarray(wy, f))
+    shape = wx.shape
+    wx, wy = wx.reshape(-1, 1), wy.reshape(-1, 1)
+    r = safe_sqrt(wx * wx + wy * wy)
+    along = r == 0
+    inv = jnp.where(along, 0.0, 1.0 / jnp.where(along, 1.0, r))
+    dx, dy = jnp.where(along, 0.0, wx * inv), jnp.where(along, 1.0, wy * inv)
+    a, b = 0.5, 0.5 * jnp.asarray(e_b, f)
+    X = 1.0 + 2.0 * jnp.asarray(l_bb, f) * jnp.cos(theta_bb)
+    cy = corner * jnp.asarray(l_bb, f) * jnp.sin(theta_bb)
+    k = jnp.arange(-copies, copies + 1, dtype=f)[None, :]
+    cx = k * X
+    # primitives (per copy): barb ellipse, proximal segment p0-c, distal segment c-p1
+    p0, c, p1 = (cx + 0.5, jnp.zeros_like(cx)), (cx + 0.5 * X, cy + jnp.zeros_like(cx)), (cx + X - 0.5, jnp.zeros_like(cx))
+    half = safe_sqrt(a * a * dy * dy + b * b * dx * dx)  # projected half width of a barb
+    sc = cx * dy
+    ends = [sc - half, sc + half] + [q[0] * dy - q[1] * dx for q in (p0, c, p1)]
+    period = X * jnp.abs(dy)
+    lo_w = -0.5 * period
+    cuts = jnp.concatenate([jnp.clip(e, lo_w, lo_w + period) for e in ends] + [lo_w, lo_w + period], axis=1)
+    cuts = jnp.sort(cuts, axis=1)
+    m = 0.5 * (cuts[:, 1:] + cuts[:, :-1])[..., None]           # (n, pieces, 1)
+    length = (cuts[:, 1:] - cuts[:, :-1])
+    e = lambda v: v[:, None, :]  # noqa: E731  copies on the last axis
+    d_b, h_b = _ellipse_hit(m, dx[..., None], dy[..., None], e(cx), a, b)
+    d_p, h_p = _segment_hit(m, dx[..., None], dy[..., None], (e(p0[0]), e(p0[1])), (e(c[0]), e(c[1])))
+    d_d, h_d = _segment_hit(m, dx[..., None], dy[..., None], (e(c[0]), e(c[1])), (e(p1[0]), e(p1[1])))
+    depth = jnp.concatenate([jnp.where(h, d, -jnp.inf) for d, h in ((d_b, h_b), (d_p, h_p), (d_d, h_d))], axis=-1)
+    n = cx.shape[1]
+    kind = jnp.repeat(jnp.arange(3), n)                           # 0 barb, 1 proximal, 2 distal
+    cover = jnp.stack([jnp.ones_like(jnp.asarray(w_bp, f)), jnp.asarray(w_bp, f), jnp.asarray(w_bd, f)])
+    order = jnp.argsort(-depth, axis=-1)                          # nearest the viewer first
+    hit = jnp.take_along_axis(jnp.isfinite(depth), order, axis=-1)
+    kd = kind[order]
+    cov = jnp.where(hit, cover[kd], 0.0)
+    trans = jnp.cumprod(1.0 - cov, axis=-1)
+    before = jnp.concatenate([jnp.ones_like(trans[..., :1]), trans[..., :-1]], axis=-1)
+    seen = before * cov                                           # what each crossing contributes
+    areas = [jnp.sum(jnp.sum(jnp.where(kd == j, seen, 0.0), axis=-1) * length, axis=-1) for j in range(3)]
+    areas.append(jnp.sum(trans[..., -1] * length, axis=-1))
+    tot = jnp.where(period[:, 0] > 0, period[:, 0], 1.0)
+    grazing = period[:, 0] == 0                                   # in the vane plane: the barbs cover all
+    w = [jnp.where(grazing, 1.0 if j == 0 else 0.0, v / tot).reshape(shape) for j, v in enumerate(areas)]
+    _, h_lo, h_hi = barbule_masking(dx[:, 0], dy[:, 0], e_b, X - 1.0)
+    return (*w, h_lo.reshape(shape), h_hi.reshape(shape))
