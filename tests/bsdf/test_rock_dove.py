@@ -14,6 +14,7 @@ from scipy.integrate import quad
 from appearance_jax.bsdf import barbule_row as row
 from appearance_jax.bsdf import rock_dove as rd
 from appearance_jax.core.vec import Vec3
+from appearance_jax.flatland import feather
 from appearance_jax.flatland import geometry as G
 from appearance_jax.optics import melanin
 from appearance_jax.optics.refractive_index import Cauchy
@@ -54,9 +55,7 @@ def _front_first_hits(p, w, n=4000, copies=24):
     Returns the fraction whose first hit is on the outer (front) side of an arc."""
     b, H, mu = float(p.b), float(p.H), float(p.mu)
     # the arc's normal azimuths [phi0, phi1] as flatland's parametric angles (decreasing in phi)
-    g_hi = math.atan2(b * math.cos(float(p.phi0)), math.sin(float(p.phi0)))
-    g_lo = math.atan2(b * math.cos(float(p.phi1)), math.sin(float(p.phi1)))
-    span = (g_hi - g_lo) % (2 * math.pi)
+    g_lo, span = feather.arc_range(b, float(p.phi0), float(p.phi1))
     dy, dz = w[0], w[2]
     r = math.hypot(dy, dz)
     dy, dz = dy / r, dz / r

@@ -64,6 +64,10 @@ def _check_beta(label, beta):
 def gaussian(x, beta):
     """G_M(x | beta): the normal density of width ``beta`` (rad) at ``x`` (rad), 1/rad."""
     _check_beta("gaussian", beta)
+    return _normal(x, beta)
+
+
+def _normal(x, beta):
     z = x / beta
     return jnp.exp(-0.5 * z * z) * (_INV_SQRT_2PI / beta)
 
@@ -73,7 +77,7 @@ def azimuthal(dphi, beta):
     real; 2 pi periodic); ``beta`` (rad) <= ~1.5 for the truncation's exactness."""
     _check_beta("azimuthal", beta)
     x = fiber.wrap_pi(jnp.asarray(dphi))
-    return sum(gaussian(x - 2.0 * math.pi * k, beta) for k in range(-K_WRAP, K_WRAP + 1))
+    return sum(_normal(x - 2.0 * math.pi * k, beta) for k in range(-K_WRAP, K_WRAP + 1))
 
 
 def cos_normaliser(Theta, beta):

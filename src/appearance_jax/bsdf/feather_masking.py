@@ -53,6 +53,14 @@ def _check(label, value, lo, lo_open):
         raise ValueError(f"feather_masking.barbule_masking: {label} = {value!r}: valid range {rng}")
 
 
+def _unit_2d(wx, wy):
+    """(wx, wy) normalised; a view along the barbule axis (0, 0) is taken as the normal view (0, 1)."""
+    r = safe_sqrt(wx * wx + wy * wy)
+    along = r == 0
+    inv = jnp.where(along, 0.0, 1.0 / jnp.where(along, 1.0, r))
+    return jnp.where(along, 0.0, wx * inv), jnp.where(along, 1.0, wy * inv)
+
+
 def projected_width(wx, wy, e_bb):
     """W: the projected width of a barbule (horizontal width 1, height e_bb) seen along the unit 2D
     direction (wx, wy)."""
@@ -66,11 +74,7 @@ def barbule_masking(wx, wy, e_bb, delta_bb):
     relative separation ``delta_bb`` >= 0 (module docstring). Arrays broadcast; branch-free."""
     _check("e_bb", e_bb, 0.0, True)
     _check("delta_bb", delta_bb, 0.0, False)
-    wx, wy = jnp.asarray(wx, jnp.result_type(float)), jnp.asarray(wy, jnp.result_type(float))
-    r = safe_sqrt(wx * wx + wy * wy)
-    along = r == 0  # a view along the barbule axis: the normal view
-    inv = jnp.where(along, 0.0, 1.0 / jnp.where(along, 1.0, r))
-    dx, dy = jnp.where(along, 0.0, wx * inv), jnp.where(along, 1.0, wy * inv)
+    dx, dy = _unit_2d(jnp.asarray(wx, jnp.result_type(float)), jnp.asarray(wy, jnp.result_type(float)))
     W = projected_width(dx, dy, e_bb)
     period = (1.0 + jnp.asarray(delta_bb)) * jnp.abs(dy)
     ok = W > period
@@ -145,11 +149,7 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     f = jnp.result_type(float)
     wx, wy = jnp.broadcast_arrays(jnp.asarray(wx, f), jnp.asarray(wy, f))
     shape = wx.shape
-    wx, wy = wx.reshape(-1, 1), wy.reshape(-1, 1)
-    r = safe_sqrt(wx * wx + wy * wy)
-    along = r == 0
-    inv = jnp.where(along, 0.0, 1.0 / jnp.where(along, 1.0, r))
-    dx, dy = jnp.where(along, 0.0, wx * inv), jnp.where(along, 1.0, wy * inv)
+    dx, dy = _unit_2d(wx.reshape(-1, 1), wy.reshape(-1, 1))
     a, b = 0.5, 0.5 * jnp.asarray(e_b, f)
     X = 1.0 + 2.0 * jnp.asarray(l_bb, f) * jnp.cos(theta_bb)
     cy = corner * jnp.asarray(l_bb, f) * jnp.sin(theta_bb)
@@ -157,7 +157,7 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     cx = k * X
     # primitives (per copy): barb ellipse, proximal segment p0-c, distal segment c-p1
     p0, c, p1 = (cx + 0.5, jnp.zeros_like(cx)), (cx + 0.5 * X, cy + jnp.zeros_like(cx)), (cx + X - 0.5, jnp.zeros_like(cx))
-    half = safe_sqrt(a * a * dy * dy + b * b * dx * dx)  # projected half width of a barb
+    half = 0.5 * projected_width(dx, dy, e_b)  # of a barb
     sc = cx * dy
     ends = [sc - half, sc + half] + [q[0] * dy - q[1] * dx for q in (p0, c, p1)]
     period = X * jnp.abs(dy)

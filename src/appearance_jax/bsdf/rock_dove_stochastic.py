@@ -39,10 +39,10 @@ from ..core.vec import Vec3
 from . import rock_dove as rd
 
 
-def _s_trt(p: rd.Params, wi: Vec3, wo: Vec3, key):
-    """One-draw estimate of S_TRT (bands last); needs ``p`` already limited by ``_arc_within_pi``."""
+def _s_trt(p: rd.Params, wi: Vec3, bi: Vec3, bo: Vec3, key):
+    """One-draw estimate of S_TRT (bands last); ``p`` already limited by ``_arc_within_pi``, ``bi``, ``bo``
+    the directions in the barbule frame."""
     uh, ut = uniforms(key, jnp.shape(wi.z), 2)
-    bi, bo = rd.to_barbule(p, wi), rd.to_barbule(p, wo)
     mirror, any_lit = rd._sample_mirror(p, bi, uh, ut)
     m = V.normalize(bi + mirror)  # the drawn normal (barbule frame)
     cos_i = jnp.clip(V.dot(bi, m), 0.0, 1.0)
@@ -57,7 +57,7 @@ def _s_trt(p: rd.Params, wi: Vec3, wo: Vec3, key):
 def _eval(p: rd.Params, wi: Vec3, wo: Vec3, key):
     p = rd._arc_within_pi(p)
     bi, bo = rd.to_barbule(p, wi), rd.to_barbule(p, wo)
-    f = rd._s_r(p, wi, wo, bi, bo) + _s_trt(p, wi, wo, key)
+    f = rd._s_r(p, wi, wo, bi, bo) + _s_trt(p, wi, bi, bo, key)
     ok = (wi.z > 0) & (wo.z > 0)
     return jnp.where(with_bands(ok), f, 0.0)
 
@@ -65,7 +65,7 @@ def _eval(p: rd.Params, wi: Vec3, wo: Vec3, key):
 def _trt(p: rd.Params, wi: Vec3, wo: Vec3, key):
     p = rd._arc_within_pi(p)
     ok = (wi.z > 0) & (wo.z > 0)
-    return jnp.where(with_bands(ok), _s_trt(p, wi, wo, key), 0.0)
+    return jnp.where(with_bands(ok), _s_trt(p, wi, rd.to_barbule(p, wi), rd.to_barbule(p, wo), key), 0.0)
 
 
 #: S_R + a one-draw S_TRT (1/sr, ``wi.shape + (bands,)``); ``key``: a PRNG key (one draw per pair)

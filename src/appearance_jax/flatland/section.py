@@ -31,7 +31,9 @@ import numpy as np
 
 from ..core.params import check_value, ParamSpec
 
-INTERFACE_KINDS = ("dielectric", "diffuse", "film", "absorber", "barbule", "saddle_mirror")
+#: the feather mode's interfaces: a random longitudinal tilt of +-``tilt`` per hit (interfaces.barbule)
+BARBULE_KINDS = ("barbule", "saddle_mirror")
+INTERFACE_KINDS = ("dielectric", "diffuse", "film", "absorber") + BARBULE_KINDS
 DISTRIBUTIONS = ("ggx", "beckmann")
 
 
@@ -226,7 +228,7 @@ class Section:
                 raise ValueError(f"{lab}.interface.distribution = {itf.distribution!r}; "
                                  f"valid: {DISTRIBUTIONS}")
             check_value(f"{lab}.interface.roughness", itf.roughness, ParamSpec(0.0, 1.0))
-            lo_tilt = 0.0 if itf.kind in ("barbule", "saddle_mirror") else -math.pi / 2  # theta_d > 0 there
+            lo_tilt = 0.0 if itf.kind in BARBULE_KINDS else -math.pi / 2  # theta_d > 0 there
             check_value(f"{lab}.interface.tilt", itf.tilt, ParamSpec(lo_tilt, math.pi / 2, True, True, "rad"))
             check_value(f"{lab}.interface.albedo", itf.albedo, ParamSpec(0.0, 1.0))
             check_value(f"{lab}.interface.film_nm", itf.film_nm, ParamSpec(0.0, math.inf, unit="nm"))

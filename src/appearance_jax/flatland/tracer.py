@@ -45,7 +45,7 @@ from ..core import vec as V
 from ..core.vec import Vec3
 from . import geometry as G
 from . import interfaces as I
-from .section import Section
+from .section import BARBULE_KINDS, Section
 
 
 class Records(NamedTuple):
@@ -72,7 +72,7 @@ def n_bands(section: Section) -> int:
         sizes.append(jnp.size(m.sigma_a))
     for s in section.shapes:
         itf = s.interface
-        if itf.kind in ("diffuse", "barbule", "saddle_mirror"):
+        if itf.kind == "diffuse" or itf.kind in BARBULE_KINDS:
             sizes.append(jnp.size(itf.albedo))
         if itf.kind in ("film", "barbule"):
             sizes.append(jnp.size(itf.wavelength_nm))
@@ -134,7 +134,7 @@ def _event_uniforms(key, shape, dtype, needed):
 
 def _uniforms_needed(section, mode):
     rough = any(s.interface.kind == "dielectric" and s.interface.rough for s in section.shapes)
-    tilted = any(s.interface.kind in ("barbule", "saddle_mirror") for s in section.shapes)
+    tilted = any(s.interface.kind in BARBULE_KINDS for s in section.shapes)
     diffuse = any(s.interface.kind in ("diffuse", "barbule") for s in section.shapes)
     # split mode still chooses at interfaces between two interior regions
     interior = any(s.inside != 0 and s.outside != 0 and s.interface.kind in ("dielectric", "film")
@@ -233,7 +233,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
             elif itf.kind == "film":
                 d_r, g_r, d_t, g_t, E_r, E_t = I.film(dd, n_out, from_out, e1, e2, itf, polarized, f.get("E"))
                 g_r, g_t = jnp.broadcast_to(g_r, (N, nb)), jnp.broadcast_to(g_t, (N, nb))
-            elif itf.kind in ("barbule", "saddle_mirror"):
+            elif itf.kind in BARBULE_KINDS:
                 if polarized:
                     raise ValueError("flatland.trace: polarized=True cannot pass a barbule (diffuse TRT)")
                 d_r, g_r, d_t, g_t = I.barbule(dd, n_out, from_out, itf, u[0], u[3], u[4])
@@ -258,7 +258,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         g_t = _select(sid[:, None], [c[3] for c in children])
         reg_r = _select(sid, [c[4] for c in children])
         reg_t = _select(sid, [c[5] for c in children])
-        opaque = _select(sid, [jnp.asarray(c[8] in ("diffuse", "absorber", "barbule", "saddle_mirror")) for c in children])
+        opaque = _select(sid, [jnp.asarray(c[8] in ("diffuse", "absorber") + BARBULE_KINDS) for c in children])
         if polarized:
             E_r = _select_vec(sid, [c[6] for c in children])
             E_t = _select_vec(sid, [c[7] for c in children])
