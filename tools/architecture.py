@@ -34,8 +34,9 @@ LAYERS: list[tuple[str, ...]] = [
     ("optics",),
     ("microfacet",),
     ("phase",),
-    ("layered", "bcsdf"),
-    ("bsdf", "flatland", "soapfilm"),
+    ("layered", "flatland"),
+    ("bcsdf",),  # above flatland: a traced fibre BCSDF (issue 21's feather_fiber) takes its lobes from flatland
+    ("bsdf", "soapfilm"),
     ("registry",),  # name -> model: above every model, read by the fitters and the CLI
     ("fit", "testing"),
     ("export",),  # fitted parameters -> renderers: reads the registry and the fit records

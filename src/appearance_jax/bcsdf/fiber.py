@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..core.frame import Frame
+from ..core.frame import Frame, meso_normal  # noqa: F401  (meso_normal: defined with the fibre frame)
 from ..core.fusion import materialize
 from ..core.special import safe_acos, safe_asin, safe_sqrt
 from ..core.vec import Vec3
@@ -42,14 +42,6 @@ def wrap_pi(x):
     call per element (~70 ns), the floor form vectorises (~0.1 ns)."""
     two_pi = 2.0 * jnp.pi
     return x - two_pi * jnp.floor((x + jnp.pi) / two_pi)
-
-
-def meso_normal(n_y, n_z, tilt):
-    """Outward mesonormal of a cuticle tilted by ``tilt`` at the point whose outward in-plane
-    normal is (0, n_y, n_z): (sin tilt, n_y cos tilt, n_z cos tilt) (Eq. 4.39, Huang 2022;
-    tilt > 0 leans it towards the tip, +x)."""
-    c, s = jnp.cos(tilt), jnp.sin(tilt)
-    return Vec3(s * jnp.ones_like(n_y), c * n_y, c * n_z)
 
 
 def bravais_eta(eta, theta):

@@ -207,6 +207,14 @@ def fiber_direction(theta, phi) -> Vec3:
 # in-plane gonioreflectometer geometry
 
 
+def meso_normal(n_y, n_z, tilt):
+    """Outward mesonormal of a cuticle tilted by ``tilt`` at the point whose outward in-plane
+    normal is (0, n_y, n_z): (sin tilt, n_y cos tilt, n_z cos tilt) (Eq. 4.39, Huang 2022;
+    tilt > 0 leans it towards the tip, +x)."""
+    c, s = jnp.cos(tilt), jnp.sin(tilt)
+    return Vec3(s * jnp.ones_like(n_y), c * n_y, c * n_z)
+
+
 def in_plane_directions(theta_i, theta_o):
     """Directions of an in-plane measurement with signed outgoing angle (radians).
 

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..bcsdf import fiber
 from ..core import vec as V
 from ..core.frame import Frame, reflect, refract
+from ..core.frame import meso_normal as cuticle_normal
 from ..core.vec import Vec3
 from ..core.warp import square_to_cosine_hemisphere
 from ..microfacet import distribution as mf
@@ -32,7 +32,7 @@ from ..optics.fresnel import fresnel_amplitudes_complex, fresnel_dielectric
 
 def meso_normal(n_out: Vec3, tilt, from_outside):
     """Mesonormal facing the incident side (Huang Eq. 4.39; inside: negated)."""
-    m = fiber.meso_normal(n_out.y, n_out.z, tilt)
+    m = cuticle_normal(n_out.y, n_out.z, tilt)
     return V.where(from_outside, m, -m)
 
 
@@ -161,7 +161,7 @@ def barbule(d: Vec3, n_out: Vec3, from_outside, itf, u_theta, u1, u2):
     from ..optics.thinfilm import airy, airy_trt
 
     theta_d = itf.tilt
-    m = fiber.meso_normal(n_out.y, n_out.z, theta_d * (2.0 * u_theta - 1.0))
+    m = cuticle_normal(n_out.y, n_out.z, theta_d * (2.0 * u_theta - 1.0))
     wi = -d
     cos_n = V.dot(wi, n_out)
     cos_m = V.dot(wi, m)
