@@ -118,7 +118,9 @@ def test_first_order_equals_single_scattering(c_d, t):
 H_TABLE = {0.5: (0.031148, 0.160145), 0.9: (0.122572, 0.507939)}
 
 
-@pytest.mark.parametrize("w", sorted(H_TABLE))
+# albedo 0.9 is `slow`: the same programs and checks as 0.5 (tests/layered/test_adding_doubling.py
+# and test_ordinates.py compare their solvers with the H-function at 0.9 in the default run)
+@pytest.mark.parametrize("w", [0.5, pytest.param(0.9, marks=pytest.mark.slow)])
 def test_semi_infinite_isotropic_medium_matches_h_function(w):
     """f(1, 1) and albedo(0.5) of the spec's table within 3 standard errors (2^14 paths each), and
     f at two oblique pairs == the H-function closed form (layers.h_function) within 4."""
@@ -235,7 +237,10 @@ def test_two_stacked_layers_equal_one(eta):
     assert_close(f1, f2, np.sqrt(s1**2 + s2**2), f"two layers vs one, eta {eta}")
 
 
-@pytest.mark.parametrize("lobes", [dict(w_g=1.0, g1=0.0), dict(w_g=0.7, g1=0.6, g2=-0.3)])
+# the isotropic lobe is `slow`: the two-lobe mixture runs the same programs and checks (isotropic
+# scattering in the default run: test_semi_infinite_isotropic_medium_matches_h_function)
+@pytest.mark.parametrize("lobes", [pytest.param(dict(w_g=1.0, g1=0.0), marks=pytest.mark.slow),
+                                   dict(w_g=0.7, g1=0.6, g2=-0.3)])
 def test_hg_media_match_adding_doubling(lobes):
     """c_d = 1 (isotropic extinction, HG mixture): the walk == the deterministic adding-doubling
     solver (spec M36), one layer over a Lambertian base and a two-layer stack over black."""

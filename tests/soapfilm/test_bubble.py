@@ -292,7 +292,7 @@ def test_render_shape_mask_and_horizontal_bands():
 
 
 def test_bad_input_names_the_argument():
-    nrm, view = _points(n=3)
+    nrm, view = _points()  # the 16 points of the shading tests: their compiled path directions
     field = th.uniform_field(500.0)
     with pytest.raises(ValueError, match="n_paths"):
         sb.path_directions(nrm, view, 0)

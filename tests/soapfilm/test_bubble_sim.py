@@ -123,9 +123,13 @@ def test_cli_scene_names_match_the_module():
 
 
 def test_bubble_sim_end_to_end(tmp_path, capsys):
+    """The gravity scene on 32 x 64 in float32 (the CLI's default state): the program of
+    tests/soapfilm/test_soapfilm_flow.py's float32 runs (same grid, still air, default settings,
+    one frame per call), so the run compiles that one flow program once, not a second for the CLI.
+    (The blow scene's air: test_scene_builds_a_valid_state, test_scene_details.)"""
     out = tmp_path / "frames"
-    rc = main(["bubble-sim", "--grid", "16x32", "--seconds", "0.02", "--frames", "2", "--render-size", "16",
-               "--air", "blow", "--out", str(out), "--no-compile-cache"])
+    rc = main(["bubble-sim", "--grid", "32x64", "--seconds", "0.02", "--frames", "2", "--render-size", "16",
+               "--scene", "gravity", "--out", str(out), "--no-compile-cache"])
     printed = capsys.readouterr().out
     assert rc == 0
     assert "frame 2/2" in printed
@@ -134,8 +138,8 @@ def test_bubble_sim_end_to_end(tmp_path, capsys):
             assert (out / name).is_file(), name
     assert (out / "sheet.png").is_file()
     s = json.loads((out / "summary.json").read_text())
-    assert s["scene"] == "blow" and s["air"] == "blow"
-    assert s["grid"] == "16x32" and s["steps"] == 10 and s["steps_requested"] == 10
+    assert s["scene"] == "gravity" and s["air"] == "none"
+    assert s["grid"] == "32x64" and s["steps"] == 10 and s["steps_requested"] == 10
     assert s["dt_seconds"] == 0.002 and s["dt"] == pytest.approx(0.04)
     assert s["simulated_seconds"] == pytest.approx(0.02, rel=1e-5)
     assert s["wall_seconds"] > 0 and s["simulate_seconds"] > 0
@@ -149,10 +153,10 @@ def test_bubble_sim_end_to_end(tmp_path, capsys):
     assert [f["step"] for f in s["frames"]] == [0, 5, 10]
     with np.load(out / "frame_0002.npz") as z:
         th = z["thickness_nm"]
-        assert th.shape == (16, 32) and np.all(th > 0) and np.all(np.isfinite(th))
+        assert th.shape == (32, 64) and np.all(th > 0) and np.all(np.isfinite(th))
         assert 500 < th.mean() < 1500  # eta0 = 500 nm half thickness: a film about 1000 nm thick
-        assert z["theta"].shape == (16,) and z["phi"].shape == (32,)
-        np.testing.assert_allclose(z["theta"], GRID.theta_centres())
+        assert z["theta"].shape == (32,) and z["phi"].shape == (64,)
+        np.testing.assert_allclose(z["theta"], SphereGrid(32, 64).theta_centres())
         assert float(z["time_s"]) == pytest.approx(0.02, rel=1e-5)
 
 

@@ -260,6 +260,10 @@ def test_velocity_gradients_are_finite():
         assert all(bool(jnp.all(jnp.isfinite(x))) for x in grads), name
 
 
+# slow: compiles the vector loop once more, in float32. Default float32 checks of the same code:
+# test_soapfilm_advect.py::test_float32_matches_float64 (departure points) and the float32 flow
+# runs of test_soapfilm_flow.py (test_float32_runs: the fused vector step, transport included)
+@pytest.mark.slow
 def test_float32_vector_step():
     g = COARSE
     u64 = _faces(g, _flow)
