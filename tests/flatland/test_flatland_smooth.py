@@ -232,9 +232,10 @@ def test_tilt_law_of_a_smooth_tilted_cylinder(alpha_deg):
 
 def test_grazing_and_edge_offsets_return_finite_values():
     sec = fl.fiber(1.55, 0.5, roughness=0.2)
-    # omega_i along the fiber axis: no projected width, nothing is hit
-    rec = fl.trace(sec, Vec3(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0)), jnp.array([-1.0, 0.0, 1.0]),
-                   KEY, max_events=4, mode="random")
+    # omega_i along the fiber axis: no projected width, nothing is hit (split mode, the rough
+    # fiber's program below; random mode: test_axis_direction_in_random_mode, slow)
+    axis = Vec3(*(jnp.asarray(np.float64(v)) for v in (1.0, 0.0, 0.0)))   # (float64, not weakly typed)
+    rec = fl.trace(sec, axis, _fill([-1.0, 0.0, 1.0]), KEY, max_events=E_SPLIT)
     for leaf in jax.tree_util.tree_leaves(rec):
         assert np.all(np.isfinite(np.asarray(leaf)))
     # h = +-1 (grazing entry) on smooth and rough fibers
@@ -246,12 +247,24 @@ def test_grazing_and_edge_offsets_return_finite_values():
         np.testing.assert_allclose(np.asarray(total), 1.0, atol=1e-9)
 
 
+@pytest.mark.slow  # a program of its own; the degenerate launch (no projected width) is the same
+# code in both modes, checked by default in split mode by test_grazing_and_edge_offsets_return_finite_values
+def test_axis_direction_in_random_mode():
+    sec = fl.fiber(1.55, 0.5, roughness=0.2)
+    rec = fl.trace(sec, Vec3(jnp.asarray(1.0), jnp.asarray(0.0), jnp.asarray(0.0)), jnp.array([-1.0, 0.0, 1.0]),
+                   KEY, max_events=4, mode="random")
+    for leaf in jax.tree_util.tree_leaves(rec):
+        assert np.all(np.isfinite(np.asarray(leaf)))
+
+
 # ----------------------------------------------------------------------------- wave data
 
 
 # The wave-data tests share traces of a water cylinder at normal incidence (module fixture):
 # the offsets of both tests in one array, max_events = 5 (later events do not change the
-# records of earlier lobes), so that three programs are compiled instead of six.
+# records of earlier lobes), both polarisations from one program (that of test_drop.py's
+# test_circle_equals_flatland_tracer). The unpolarised wave trace, a program of its own, is
+# checked under slow (test_unpolarised_wave_trace_weights).
 H_PATH = np.linspace(-0.99, 0.99, 15)
 H_FOCI = np.array([-0.95, -0.6, -0.2, 0.1, 0.5, 0.8, 0.9, 0.97])
 H_WAVE = np.unique(np.concatenate([H_PATH, H_FOCI]))
@@ -278,8 +291,7 @@ def water_cylinder():
     # (wave=True as above: the same static configuration, the same compiled program)
     par = fl.trace(sec, wi, h, max_events=5, wave=True, polarized=True,
                    field=Vec3(0.0, 0.0, 1.0 + 0j))  # in the section plane (TE)
-    unpol = fl.trace(sec, wi, h, max_events=5, wave=True)
-    return rec, par, unpol
+    return rec, par
 
 
 def test_optical_path_and_amplitudes_equal_closed_forms(water_cylinder):
@@ -287,7 +299,7 @@ def test_optical_path_and_amplitudes_equal_closed_forms(water_cylinder):
     (1 - rho^2)(-rho)^(p-1); |A_par| likewise with rho_par."""
     n = 1.331
     h = H_PATH
-    rec, par, unpol = (_at(r, h) for r in water_cylinder)
+    rec, par = (_at(r, h) for r in water_cylinder)
     i = np.arcsin(np.abs(h))
     r = np.arcsin(np.sin(i) / n)
     rho_s = (np.cos(i) - n * np.cos(r)) / (np.cos(i) + n * np.cos(r))
@@ -300,6 +312,19 @@ def test_optical_path_and_amplitudes_equal_closed_forms(water_cylinder):
         E_par = np.abs(np.stack([np.asarray(c[p]) for c in par.field]))
         np.testing.assert_allclose(np.sqrt(np.sum(E_par ** 2, 0)), np.abs(a_p), atol=1e-12)
         np.testing.assert_allclose(np.abs(np.asarray(par.field.x[p])), 0.0, atol=1e-12)  # stays TE
+
+
+@pytest.mark.slow  # a program of its own (wave data, unpolarised): the same weights are checked by
+# default in split mode (test_smooth_circle_matches_spec_m18_table), the wave data on the
+# polarised traces (test_optical_path_and_amplitudes_equal_closed_forms)
+def test_unpolarised_wave_trace_weights():
+    n, h = 1.331, H_PATH
+    unpol = fl.trace(fl.cylinder(n), fiber_direction(0.0, 0.0), jnp.asarray(H_WAVE), max_events=5, wave=True)
+    unpol = _at(unpol, h)
+    i = np.arcsin(np.abs(h))
+    r = np.arcsin(np.sin(i) / n)
+    rho_s = (np.cos(i) - n * np.cos(r)) / (np.cos(i) + n * np.cos(r))
+    rho_p = (n * np.cos(i) - np.cos(r)) / (n * np.cos(i) + np.cos(r))
     # the unpolarised R weight is the mean of the two polarisations
     np.testing.assert_allclose(0.5 * (rho_s ** 2 + rho_p ** 2), np.asarray(unpol.weight[0, :, 0]), atol=1e-12)
 
@@ -342,7 +367,7 @@ def test_meridional_foci_equal_brute_force_neighbour_crossings(p, water_cylinder
     n, dh = 1.331, 1e-6
     hs = H_FOCI
     # the count is symmetric in h, so the side convention of the brute force does not matter
-    rec = _at(water_cylinder[2], hs)                   # wave=True, unpolarised, 5 events
+    rec = _at(water_cylinder[0], hs)                   # wave=True, polarised (perpendicular), 5 events
     for j, h in enumerate(hs):
         a, da = _polyline(h, n, p)
         b, db = _polyline(h + dh, n, p)
@@ -355,30 +380,30 @@ def test_meridional_foci_equal_brute_force_neighbour_crossings(p, water_cylinder
         assert int(rec.foci[p, j]) == count, (h, int(rec.foci[p, j]), count)
 
 
-def test_water_cylinder_rainbows_at_descartes_angles():
+# The caustics program is compiled per lobe (its number of events is static): p = 2 runs by
+# default, p = 3 (the same code with one more event) under slow; the secondary bow's angle at
+# n = 1.331 is checked by default on the drop tracer (test_drop.py's C15 table, a = 0.4 mm).
+@pytest.mark.parametrize("p, regression_deg", [(2, 137.630), pytest.param(3, 129.635, marks=pytest.mark.slow)])
+def test_water_cylinder_rainbows_at_descartes_angles(p, regression_deg):
     """Primary (p = 2) and secondary (p = 3) rainbows of a water column at normal incidence,
     found on the tracer, vs Descartes' minimum deviation (cos^2 i = (n^2 - 1)/(p^2 - 1))."""
     water = load_material("water_H2O_Daimon-20.0C")
     for wl in (450.0, 650.0):
         n = float(water(wl)[0])
-        sec = fl.cylinder(n)
-        for p in (2, 3):
-            c = fl.caustics(sec, fiber_direction(0.0, 0.0), p)
-            ang = np.degrees(np.asarray(c.scattering_angle)[np.asarray(c.valid)])
-            i = np.arccos(np.sqrt((n * n - 1) / (p * p - 1)))
-            r = np.arcsin(np.sin(i) / n)
-            D = 2 * (i - r) + (p - 1) * (np.pi - 2 * r)
-            ref = np.degrees(np.arccos(np.cos(D)))
-            assert ang.size == 2                      # +h and -h branches
-            np.testing.assert_allclose(ang, ref, atol=1e-6)   # issue: 0.01 deg
-            h_ref = np.sin(i)
-            np.testing.assert_allclose(np.sort(np.abs(np.asarray(c.h)[np.asarray(c.valid)])), [h_ref, h_ref],
-                                       atol=1e-7)
+        c = fl.caustics(fl.cylinder(n), fiber_direction(0.0, 0.0), p)
+        ang = np.degrees(np.asarray(c.scattering_angle)[np.asarray(c.valid)])
+        i = np.arccos(np.sqrt((n * n - 1) / (p * p - 1)))
+        r = np.arcsin(np.sin(i) / n)
+        D = 2 * (i - r) + (p - 1) * (np.pi - 2 * r)
+        ref = np.degrees(np.arccos(np.cos(D)))
+        assert ang.size == 2                      # +h and -h branches
+        np.testing.assert_allclose(ang, ref, atol=1e-6)   # issue: 0.01 deg
+        h_ref = np.sin(i)
+        np.testing.assert_allclose(np.sort(np.abs(np.asarray(c.h)[np.asarray(c.valid)])), [h_ref, h_ref],
+                                   atol=1e-7)
     # the spec's regression numbers at n = 1.331 (C2): 137.630 / 129.635 deg
-    c2 = fl.caustics(fl.cylinder(1.331), fiber_direction(0.0, 0.0), 2)
-    c3 = fl.caustics(fl.cylinder(1.331), fiber_direction(0.0, 0.0), 3)
-    assert abs(np.degrees(float(c2.scattering_angle[np.argmax(c2.valid)])) - 137.630) < 1e-3
-    assert abs(np.degrees(float(c3.scattering_angle[np.argmax(c3.valid)])) - 129.635) < 1e-3
+    c = fl.caustics(fl.cylinder(1.331), fiber_direction(0.0, 0.0), p)
+    assert abs(np.degrees(float(c.scattering_angle[np.argmax(c.valid)])) - regression_deg) < 1e-3
 
 
 def test_thin_film_interface_gives_airy_reflectance():
@@ -389,7 +414,8 @@ def test_thin_film_interface_gives_airy_reflectance():
     theta_i, h = 0.4, np.array([0.0, 0.5, 0.9])
     rec = fl.trace(sec, _dir(theta_i, 0.0), jnp.asarray(h), max_events=3)
     cos3d = np.cos(theta_i) * np.sqrt(1 - h ** 2)
-    R = airy(jnp.asarray(cos3d)[:, None], wl, 300.0, 1.0, 1.33, 1.55).R
+    # (one compiled program: eagerly airy's ~40 operations compile one by one)
+    R = jax.jit(lambda c: airy(c, wl, 300.0, 1.0, 1.33, 1.55).R)(jnp.asarray(cos3d)[:, None])
     np.testing.assert_allclose(np.asarray(rec.weight[0]), np.asarray(R), rtol=1e-10)
     total = rec.weight.sum(0) + rec.absorbed + rec.lost + rec.residual
     np.testing.assert_allclose(np.asarray(total), 1.0, atol=1e-10)
@@ -398,9 +424,19 @@ def test_thin_film_interface_gives_airy_reflectance():
 def test_gradient_of_smooth_lobe_albedo_matches_finite_differences():
     wi = _dir(0.3, 0.0)
 
-    # (n_h, max_events and n_lobes of the albedo test above: the finite differences run its
-    # compiled trace; lobe 1 is TT whatever the number of events)
-    def tt(sigma, eta):
-        return fl.smooth_lobes(fl.fiber(eta, sigma), wi, n_h=512, n_lobes=4, max_events=12).albedo[1, 0]
+    # (lobe 1 is TT whatever the number of events). The fiber is built outside the compiled
+    # program: inside it its zero roughness would be traced, which counts as rough
+    smooth = fl.fiber(1.55, 0.4)
 
-    testing.assert_gradients(lambda x: tt(*x), (0.4, 1.55), step=1e-6, rtol=1e-6, mode="fwd", name="TT albedo")
+    def tt(x):
+        sec = smooth.with_media(sigma_a=x[0], eta=x[1])
+        return fl.smooth_lobes(sec, wi, n_h=512, n_lobes=4, max_events=12).albedo[1, 0]
+
+    # one compiled program, a jvp along a given direction: the value for the finite differences
+    # and one derivative per call (jacfwd of the eager smooth_lobes compiled a vmapped jvp of the
+    # trace and dozens of small programs)
+    jvp = jax.jit(lambda x, v: jax.jvp(tt, (x,), (v,)))
+    e = np.eye(2)
+    testing.assert_gradients(lambda x: jvp(jnp.stack(x), e[0])[0], (0.4, 1.55), step=1e-6, rtol=1e-6,
+                             grad_fn=lambda x: tuple(jvp(jnp.stack(x), e[k])[1] for k in range(2)),
+                             name="TT albedo")

@@ -6,13 +6,39 @@ import numpy as np
 import pytest
 
 from appearance_jax.flatland import rainbow
+from appearance_jax.flatland.drop import trace_drop
 from appearance_jax.phase import descartes, mie
 
 THETA = np.radians(np.arange(124.0, 148.0, 0.01))
 # Compilation dominates: drop_phase_function traces one program per (number of rays, families)
-# and collects one per (rays, angles, families). N_SPHERE: the default rays of the 0.4 mm sphere
-# (60 per unit k a at 650 nm); the 0.2 mm sphere below runs them too (twice its own default).
-N_SPHERE = int(60 * 2 * np.pi * 0.4e6 / 650.0)
+# and collects one per (rays, angles, families). Every test here therefore traces N_RAYS rays
+# (families p <= 3): one trace program for the file. N_RAYS is the library's lower bound on the
+# default, which the fog drop below (0.01 mm) gets with n_rays left out. Measured: the 0.4 mm
+# sphere's blurred table at 20000 rays equals the one at its default 231994 rays (60 per unit
+# k a) to 3e-6 relative, the unblurred 0.2 mm one to 5e-5; the peaks of the non-spherical views
+# are those of 40000 rays to the 0.002 deg of the grid.
+N_RAYS = 20000
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _each_fan_traced_once():
+    """drop_phase_function traces one fan per wavelength, and a fan depends on the section, the
+    index, the impact parameters and the families, not on the drop's size (only the collection's
+    size parameter does). The tables below share fans (the circle at 650 nm: eight tables; the
+    rain and fog drops: every wavelength; the top and bottom views: one meridian fan), so this
+    module traces each fan once: trace_drop, memoised on its arguments, the same function."""
+    fans = {}
+
+    def traced_once(curve, eta, *, inclination=0.0, s=None, n_rays=4096, families=4):
+        key = (np.asarray(curve.c).tobytes(), float(curve.orient), float(eta), float(inclination),
+               None if s is None else np.asarray(s).tobytes(), int(n_rays), int(families))
+        if key not in fans:
+            fans[key] = trace_drop(curve, eta, inclination=inclination, s=s, n_rays=n_rays, families=families)
+        return fans[key]
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(rainbow, "trace_drop", traced_once)
+        yield
 
 
 def _mie(radius_mm, theta, wl=650.0, n=1.331):
@@ -33,7 +59,7 @@ def _smoothed_peak(theta, i, lo, hi, sigma_deg=0.05):
 
 @pytest.fixture(scope="module")
 def sphere_04():
-    return rainbow.drop_phase_function(0.4, wavelengths_nm=[650.0], theta=THETA)
+    return rainbow.drop_phase_function(0.4, wavelengths_nm=[650.0], theta=THETA, n_rays=N_RAYS)
 
 
 def test_blurred_sphere_matches_mie_c9(sphere_04):
@@ -73,7 +99,7 @@ def test_unblurred_supernumeraries_follow_mie():
     # whole rainbow pipeline): a = 0.2 mm, the maxima beyond the first within 0.05 deg
     theta = np.radians(np.arange(137.0, 143.5, 0.005))
     t = rainbow.drop_phase_function(0.2, wavelengths_nm=[650.0], theta=theta, blur_diffraction=False,
-                                    n_rays=N_SPHERE)  # (the trace of sphere_04: one program)
+                                    n_rays=N_RAYS)  # (the trace of sphere_04: one program)
     mp, _ = _mie(0.2, theta)
     corr = np.corrcoef(t.perp[0][np.degrees(theta) > 138.7], mp[np.degrees(theta) > 138.7])[0, 1]
     assert corr > 0.99  # spec C8 (primary side, p = 0 ripple included)
@@ -87,11 +113,11 @@ def test_non_spherical_views_c15_c16():
     # geometric caustics (incoherent, unblurred) of a 0.5 mm Beard-Chuang drop, sun at 0 deg:
     # top of the bow 138.433, bottom 139.379 (spec §1.2.8, self-derived), side = sphere 137.630
     theta = np.radians(np.arange(136.5, 140.5, 0.002))
-    # 40000 rays of families p <= 3, the trace program of the tests below: p = 3 sends nothing
-    # into 136.5-140.5 deg here (the secondary bows lie below 132 deg), and the peaks found are
-    # those of 60000 rays of p = 2 alone to the 0.002 deg of the grid (measured)
+    # N_RAYS rays of families p <= 3, the file's trace program: p = 3 sends nothing into
+    # 136.5-140.5 deg here (the secondary bows lie below 132 deg), and the peaks found are those
+    # of 60000 rays of p = 2 alone to the 0.002 deg of the grid (measured)
     kw = dict(wavelengths_nm=[650.0], theta=theta, mode="incoherent", blur_diffraction=False, families=(2, 3),
-              n_rays=40000)
+              n_rays=N_RAYS)
     got = {v: np.degrees(rainbow.peak(rainbow.drop_phase_function(0.5, view=v, **kw), 136.5, 140.5))
            for v in ("top", "bottom", "side")}
     assert abs(got["top"] - 138.433) < 0.02, got
@@ -122,13 +148,15 @@ def test_colours_and_fog_bow():
         w = rgb[sel].sum(axis=1)
         return rgb, np.sqrt(np.sum(w[:, None] * (chrom - np.average(chrom, axis=0, weights=w)) ** 2) / w.sum())
 
-    rain = rainbow.drop_phase_function(0.1, wavelengths_nm=wl, theta=theta, n_rays=40000)
+    rain = rainbow.drop_phase_function(0.1, wavelengths_nm=wl, theta=theta, n_rays=N_RAYS)
     rgb, spread_rain = chroma_spread(rain, 135, 143)
     prim = (deg > 136) & (deg < 142)
     assert deg[prim][np.argmax(rgb[prim, 0])] < deg[prim][np.argmax(rgb[prim, 2])]
     sec = (deg > 124) & (deg < 131)
     assert deg[sec][np.argmax(rgb[sec, 0])] > deg[sec][np.argmax(rgb[sec, 2])]
-    fog = rainbow.drop_phase_function(0.01, wavelengths_nm=wl, theta=theta, n_rays=40000)  # same programs as above
+    # the default n_rays (60 per unit k a at 400 nm, 9425, raised to the lower bound N_RAYS): the
+    # default path, and the programs of the rain above
+    fog = rainbow.drop_phase_function(0.01, wavelengths_nm=wl, theta=theta)
     _, spread_fog = chroma_spread(fog, 135, 143)
     assert spread_fog < 0.5 * spread_rain, (spread_fog, spread_rain)
     # the sigma / 2 sigma blur is blended across theta_split: no step there even for fog (sigma ~3 deg)
@@ -159,7 +187,7 @@ def test_full_table_as_registered_phase_function():
 
     theta = rainbow.full_theta(1801)
     t = rainbow.drop_phase_function(0.1, wavelengths_nm=[650.0], theta=theta, families=(0, 1, 2, 3),
-                                    n_rays=40000)
+                                    n_rays=N_RAYS)
     i = rainbow.intensity(t)[0]
     total = 2 * np.pi * np.trapezoid(i * np.sin(theta), theta)
     assert abs(total - 0.9968) < 0.01, total
