@@ -150,6 +150,8 @@ GRID: dict[str, list[Case]] = {
     # checks (flatland reference, reciprocity within noise, gradients with common random numbers)
     # are in tests/bcsdf/test_huang_hair.py
     "huang_hair": [Case("default", dict())],
+    # a Monte Carlo estimator: its statistical checks are in tests/bcsdf/test_feather_fiber.py
+    "feather_fiber": [Case("default", dict())],
     "henyey_greenstein": [
         Case("isotropic", dict(g=0.0), lossless=True),
         Case("forward", dict(g=0.8), lossless=True),

@@ -14,7 +14,7 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 
 from __future__ import annotations
 
-from .bcsdf import chiang, huang, marschner, sadeghi, thread
+from .bcsdf import chiang, feather_fiber, huang, marschner, sadeghi, thread
 from .bsdf import (cloth, cosmetics, cosmetics_ordinates, iridescent, lambert, rock_dove, rough_conductor, rough_dielectric,
                    rough_plastic, snake)
 from .bsdf.sum import sum_model
@@ -42,6 +42,7 @@ _MODELS: tuple[Model, ...] = (
     marschner.MODEL,
     sadeghi.MODEL,
     huang.MODEL,
+    feather_fiber.MODEL,
     thread.MODEL,
 )
 

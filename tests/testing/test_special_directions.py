@@ -20,12 +20,13 @@ CHEAP = {
     "rock_dove": dict(n_phi=2, n_theta=1),
     # fewer ordinates and modes: the same code paths (interpolation to the directions, the tilt correction)
     "cosmetics_ordinates": dict(n_nodes=8, n_modes=6),
+    "feather_fiber": dict(n_h=2, max_events=6, medulla=True),
 }
 
 # models whose eval + gradient take more than ~10 s to compile here: their float32 run is in the
 # slow suite (the default run checks them in float64, the dtype of the other tests)
 HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake",
-         "rock_dove", "cosmetics_ordinates"}
+         "rock_dove", "cosmetics_ordinates", "feather_fiber"}
 # sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
 SLOW = {"rough_plastic+lambert"}
 
