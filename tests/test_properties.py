@@ -247,6 +247,7 @@ SLOW_GRID: dict[str, list[Case]] = {
     "marschner_hair": [Case("eccentric_half", dict(longitudinal="half", axis_ratio=0.8))],
     "sadeghi_hair": [Case("default", dict(), opts={"skip": ("furnace",)})],
     "huang_hair": [Case("ellipse", dict(eccentricity=0.5))],
+    "feather_fiber": [Case("default", dict())],  # Monte Carlo: tests/bcsdf/test_feather_fiber.py
     "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]
