@@ -386,10 +386,12 @@ def _gradients(model, params, case, scale=1):
         out = jnp.sum(c * model.eval(p, wi, wo))
         return out + jnp.sum(d * model.pdf(p, wi, wo)) if has_pdf else out
 
-    # one compiled program for the derivatives (jax.grad of a jitted function compiles its
-    # forward and backward passes separately), one for the finite differences
-    fn, grad_fn = jax.jit(functional), jax.jit(jax.grad(functional))
-    testing.assert_gradients(fn, params, name=model.name, grad_fn=grad_fn)
+    # one compiled program for the value and the derivatives (jax.grad of a jitted function compiles
+    # its forward and backward passes separately), which the finite differences run too: a separate
+    # forward program would be a second compile, and the backward pass at 32 pairs costs little
+    value_and_grad = jax.jit(jax.value_and_grad(functional))
+    testing.assert_gradients(lambda p: value_and_grad(p)[0], params, name=model.name,
+                             grad_fn=lambda p: value_and_grad(p)[1])
 
 
 CHECKS = {"reciprocity": _reciprocity, "furnace": _furnace, "sampling": _sampling, "chi2": _chi2,

@@ -2,7 +2,8 @@
 +-1e-7, all 36 pairs among them): finite values and pdfs, 0 below the horizon for
 reflection BSDFs, finite gradients w.r.t. every floating-point field; float32 and float64
 (appearance_jax.testing.check_special_directions). Expensive models run with small static
-sample counts (the singular directions do not depend on them), and their float32 case is slow."""
+sample counts (the singular directions do not depend on them). The default run checks every
+model in one dtype (float64 for the expensive ones, float32 for the others), -m slow in both."""
 
 import numpy as np
 import pytest
@@ -23,16 +24,24 @@ CHEAP = {
     "feather_fiber": dict(n_h=2, max_events=6, medulla=True),
 }
 
-# models whose eval + gradient take more than ~10 s to compile here: their float32 run is in the
-# slow suite (the default run checks them in float64, the dtype of the other tests)
+# Every model keeps one dtype in the default run, the other is a second case of the same code (slow).
+# Models whose eval + gradient take more than ~10 s to compile here: float64 (the dtype of their other
+# tests), float32 slow. The others: float32 (the grazing pairs are one float32 rounding off the
+# horizon, and this is the only float32 run of their eval and gradients; their other tests run in
+# float64), float64 slow.
 HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake",
          "rock_dove", "cosmetics_ordinates", "feather_fiber"}
 # sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
 SLOW = {"rough_plastic+lambert"}
 
+
+def _default_dtype(name):
+    return "float64" if name in HEAVY else "float32"
+
+
 MODELS = {m.name: m for m in registry.models()}
 CASES = [pytest.param(name, dtype, id=f"{name}-{dtype}",
-                      marks=[pytest.mark.slow] if name in SLOW or (dtype == "float32" and name in HEAVY) else [])
+                      marks=[pytest.mark.slow] if name in SLOW or dtype != _default_dtype(name) else [])
          for name in sorted(MODELS) for dtype in ("float32", "float64")]
 
 
