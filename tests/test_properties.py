@@ -152,6 +152,8 @@ GRID: dict[str, list[Case]] = {
     "huang_hair": [Case("default", dict())],
     # a Monte Carlo estimator: its statistical checks are in tests/bcsdf/test_feather_fiber.py
     "feather_fiber": [Case("default", dict())],
+    # a Monte Carlo estimator: its statistical checks are in tests/bsdf/test_feather.py
+    "feather": [Case("default", dict())],
     "henyey_greenstein": [
         Case("isotropic", dict(g=0.0), lossless=True),
         Case("forward", dict(g=0.8), lossless=True),
@@ -248,6 +250,7 @@ SLOW_GRID: dict[str, list[Case]] = {
     "sadeghi_hair": [Case("default", dict(), opts={"skip": ("furnace",)})],
     "huang_hair": [Case("ellipse", dict(eccentricity=0.5))],
     "feather_fiber": [Case("default", dict())],  # Monte Carlo: tests/bcsdf/test_feather_fiber.py
+    "feather": [Case("default", dict())],  # Monte Carlo: tests/bsdf/test_feather.py
     "henyey_greenstein": [Case(f"g{g}", dict(g=g), lossless=True, opts=_PEAKED if abs(g) > 0.9 else {})
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]

@@ -15,8 +15,8 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 from __future__ import annotations
 
 from .bcsdf import chiang, feather_fiber, huang, marschner, sadeghi, thread
-from .bsdf import (cloth, cosmetics, cosmetics_ordinates, iridescent, lambert, rock_dove, rough_conductor, rough_dielectric,
-                   rough_plastic, snake)
+from .bsdf import (cloth, cosmetics, cosmetics_ordinates, feather, iridescent, lambert, rock_dove, rough_conductor,
+                   rough_dielectric, rough_plastic, snake)
 from .bsdf.sum import sum_model
 from .core.model import Model
 from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes, tabulated
@@ -29,6 +29,7 @@ _MODELS: tuple[Model, ...] = (
     iridescent.MODEL,
     snake.MODEL,
     rock_dove.MODEL,
+    feather.MODEL,
     cosmetics.MODEL,
     cosmetics_ordinates.MODEL,
     cloth.MODEL,

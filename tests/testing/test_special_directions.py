@@ -22,6 +22,7 @@ CHEAP = {
     # fewer ordinates and modes: the same code paths (interpolation to the directions, the tilt correction)
     "cosmetics_ordinates": dict(n_nodes=8, n_modes=6),
     "feather_fiber": dict(n_h=2, max_events=6, medulla=True),
+    "feather": dict(n_h=2, max_events=6),
 }
 
 # Every model keeps one dtype in the default run, the other is a second case of the same code (slow).
@@ -30,7 +31,8 @@ CHEAP = {
 # horizon, and this is the only float32 run of their eval and gradients; their other tests run in
 # float64), float64 slow.
 HEAVY = {"huang_hair", "marschner_hair", "cosmetics", "cloth", "cloth_weave", "rough_plastic", "iridescent", "snake",
-         "rock_dove", "cosmetics_ordinates", "feather_fiber"}
+         "rock_dove", "cosmetics_ordinates", "feather_fiber",
+         "feather"}
 # sums whose components are checked on their own, and whose sum code rough_conductor+lambert covers
 SLOW = {"rough_plastic+lambert"}
 

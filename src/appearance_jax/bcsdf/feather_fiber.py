@@ -125,17 +125,24 @@ class Params:
             raise ValueError(f"feather_fiber.Params: max_events = {self.max_events} < n_lobes = {self.n_lobes}: "
                              "each kept lobe needs an event")
         if self.medulla:
-            # the medulla's extreme point in every direction must be inside the cortex y^2 + z^2 / e^2 < 1:
-            # sample its boundary densely (an ellipse inside an ellipse: no closed form worth its branches)
-            t = np.linspace(0.0, 2.0 * np.pi, 721)
-            e = np.asarray(self.eccentricity, np.float64)[..., None]
-            y = np.asarray(self.medulla_y, np.float64)[..., None] + np.asarray(self.medulla_a, np.float64)[..., None] * np.cos(t)
-            z = np.asarray(self.medulla_z, np.float64)[..., None] + np.asarray(self.medulla_b, np.float64)[..., None] * np.sin(t)
-            if np.any(y * y + (z / e) ** 2 >= 1.0 - 1e-9):
-                raise ValueError(
-                    f"feather_fiber.Params: the medulla (semi-axes {self.medulla_a}, {self.medulla_b} at "
-                    f"({self.medulla_y}, {self.medulla_z})) is not strictly inside the cortex (semi-axes 1, "
-                    f"eccentricity = {self.eccentricity}): shrink it or move its centre")
+            check_medulla("feather_fiber.Params", self.eccentricity, self.medulla_a, self.medulla_b,
+                          self.medulla_y, self.medulla_z)
+
+
+def check_medulla(label, eccentricity, a, b, y, z):
+    """Raise a ValueError naming the values unless the medulla ellipse (semi-axes a, b centred at (y, z))
+    lies strictly inside the cortex (semi-axes 1, ``eccentricity``); traced values are not checked."""
+    if any(isinstance(v, jax.core.Tracer) for v in (eccentricity, a, b, y, z)):
+        return
+    # the medulla's extreme point in every direction must be inside the cortex y^2 + z^2 / e^2 < 1:
+    # sample its boundary densely (an ellipse inside an ellipse: no closed form worth its branches)
+    t = np.linspace(0.0, 2.0 * np.pi, 721)
+    f = lambda v: np.asarray(v, np.float64)[..., None]  # noqa: E731
+    py, pz = f(y) + f(a) * np.cos(t), f(z) + f(b) * np.sin(t)
+    if np.any(py * py + (pz / f(eccentricity)) ** 2 >= 1.0 - 1e-9):
+        raise ValueError(
+            f"{label}: the medulla (semi-axes {a}, {b} at ({y}, {z})) is not strictly inside the cortex "
+            f"(semi-axes 1, eccentricity = {eccentricity}): shrink it or move its centre")
 
 
 def section(p: Params) -> Section:
@@ -267,16 +274,15 @@ def _pdf(p: Params, wi: Vec3, wo: Vec3, key=None):
     return _estimate(p, wi, wo, key, "pdf")
 
 
-def _sample(p: Params, wi: Vec3, key):
-    """(wo, weight = S_h cos(theta_o) / pdf_h (bands), pdf_h) for one offset per direction."""
-    (wi_f,), shape = _flat_pairs(wi)
-    N = wi_f.x.shape[0]
+def sample_at(p: Params, wi: Vec3, h, key):
+    """One sample per ray of flat ``wi`` (N,) launched at offsets ``h`` (N,): ``(wo, weight, pdf_h)`` with
+    weight = S_h cos(theta_o) / pdf_h (bands) for the lobe set of that offset (zero where nothing left).
+    For composing models (``bsdf.feather``) that choose the offsets; :func:`sample` draws them."""
+    N = wi.x.shape[0]
     dtype = jnp.result_type(float)
-    k_h, k_t, k_l, k_m, k_n = jax.random.split(key, 5)
-    lo, hi = jnp.asarray(p.h_lo, dtype), jnp.asarray(p.h_hi, dtype)
-    h = lo + (hi - lo) * jax.random.uniform(k_h, (N,), dtype)
-    wi_f, on = _off_axis(wi_f)
-    lob = _lobes(p, wi_f, h, k_t)
+    k_t, k_l, k_m, k_n = jax.random.split(key, 4)
+    wi, on = _off_axis(wi)
+    lob = _lobes(p, wi, h, k_t)
     lum = jnp.maximum(luminance_or_mean(lob.amplitude), 0.0) * on
     cdf = jnp.cumsum(lum, axis=0)
     tot = cdf[-1]
@@ -286,11 +292,21 @@ def _sample(p: Params, wi: Vec3, key):
     tho, _ = detectors.sample_longitudinal(jax.random.uniform(k_m, (N,), dtype), pick(lob.theta), p.beta_m)
     pho, _ = detectors.sample_azimuthal(jax.random.uniform(k_n, (N,), dtype), pick(lob.phi), p.beta_n)
     wo = fiber_direction(tho, pho)
-    s = _lobe_sum(p, lob, wi_f, wo)
+    s = _lobe_sum(p, lob, wi, wo)
     pdf = _lobe_pdf(p, lob, wo)
     good = (tot > 0) & (pdf > 0)
     weight = jnp.where(good[:, None], s * jnp.cos(tho)[:, None] / jnp.where(good, pdf, 1.0)[:, None], 0.0)
-    pdf = jnp.where(good, pdf, 0.0)
+    return wo, weight, jnp.where(good, pdf, 0.0)
+
+
+def _sample(p: Params, wi: Vec3, key):
+    """(wo, weight = S_h cos(theta_o) / pdf_h (bands), pdf_h) for one offset per direction."""
+    (wi_f,), shape = _flat_pairs(wi)
+    dtype = jnp.result_type(float)
+    k_h, k_s = jax.random.split(key)
+    lo, hi = jnp.asarray(p.h_lo, dtype), jnp.asarray(p.h_hi, dtype)
+    h = lo + (hi - lo) * jax.random.uniform(k_h, wi_f.x.shape, dtype)
+    wo, weight, pdf = sample_at(p, wi_f, h, k_s)
     return (Vec3(*(c.reshape(shape) for c in wo)), weight.reshape(shape + weight.shape[-1:]), pdf.reshape(shape))
 
 
@@ -301,6 +317,8 @@ def _lobes_public(p: Params, wi: Vec3, h, key=None) -> Lobes:
     return _lobes(p, wi, h, _key(key))
 
 
+# for composing models (bsdf.feather): the lobes at given offsets, S_h and pdf_h of their lobe sets
+trace_lobes, lobe_value, lobe_density, off_axis, stratified_offsets = _lobes, _lobe_sum, _lobe_pdf, _off_axis, _offsets
 eval = boundary(_eval, Params)
 pdf = boundary(_pdf, Params)
 lobes = boundary(_lobes_public, Params)

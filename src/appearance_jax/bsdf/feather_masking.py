@@ -124,7 +124,8 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     to the corner c = (k X + X / 2, corner l_bb sin theta_bb) and the next barb's distal barbules the
     segment from c to ((k + 1) X - 1/2, 0), X = 1 + 2 l_bb cos theta_bb (``corner`` = +1: a V opening
     towards +y, -1: inverted). A barbule segment covers the fraction ``w_bp`` / ``w_bd`` of what is
-    behind it (the barbule masking w'_bb of its own frame, :func:`barbule_masking`).
+    behind it (the barbule masking w'_bb of its own frame, :func:`barbule_masking`; scalars or arrays
+    that broadcast with the directions).
 
     Returns ``(w_b, w_bp, w_bd, w_t, h_lo, h_hi)``: the fractions of the projected period (sum 1) where
     the viewer along (wx, wy) sees a barb, a proximal barbule, a distal one, or through the vane; and
@@ -147,7 +148,7 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     if corner not in (1, -1):
         raise ValueError(f"feather_masking.barb_masking: corner = {corner!r}: +1 or -1")
     f = jnp.result_type(float)
-    wx, wy = jnp.broadcast_arrays(jnp.asarray(wx, f), jnp.asarray(wy, f))
+    wx, wy, w_bp, w_bd = jnp.broadcast_arrays(*(jnp.asarray(v, f) for v in (wx, wy, w_bp, w_bd)))
     shape = wx.shape
     dx, dy = _unit_2d(wx.reshape(-1, 1), wy.reshape(-1, 1))
     a, b = 0.5, 0.5 * jnp.asarray(e_b, f)
@@ -173,11 +174,11 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     depth = jnp.concatenate([jnp.where(h, d, -jnp.inf) for d, h in ((d_b, h_b), (d_p, h_p), (d_d, h_d))], axis=-1)
     n = cx.shape[1]
     kind = jnp.repeat(jnp.arange(3), n)                           # 0 barb, 1 proximal, 2 distal
-    cover = jnp.stack([jnp.ones_like(jnp.asarray(w_bp, f)), jnp.asarray(w_bp, f), jnp.asarray(w_bd, f)])
     order = jnp.argsort(-depth, axis=-1)                          # nearest the viewer first
     hit = jnp.take_along_axis(jnp.isfinite(depth), order, axis=-1)
     kd = kind[order]
-    cov = jnp.where(hit, cover[kd], 0.0)
+    w_p, w_d = w_bp.reshape(-1, 1, 1), w_bd.reshape(-1, 1, 1)     # per direction
+    cov = jnp.where(hit, jnp.where(kd == 0, 1.0, jnp.where(kd == 1, w_p, w_d)), 0.0)
     trans = jnp.cumprod(1.0 - cov, axis=-1)
     before = jnp.concatenate([jnp.ones_like(trans[..., :1]), trans[..., :-1]], axis=-1)
     seen = before * cov                                           # what each crossing contributes
