@@ -253,7 +253,13 @@ def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
         x = _lobe_sum(p, lob, a, b) if what == "eval" else _lobe_pdf(p, lob, b)[:, None]
         return jnp.where(ok, x, 0.0)
 
-    x = jax.vmap(one_pair)(wi_f, wo_f)                                                # (pairs, n_h, bands)
+    return offsets_mean(jax.vmap(one_pair)(wi_f, wo_f), shape, what)
+
+
+def offsets_mean(x, shape, what):
+    """Mean and standard error over the offsets of per-offset values x (pairs, n_h, bands), 0 where not
+    finite, reshaped to the pairs' broadcast ``shape`` (+ bands for ``what="eval"``, none for "pdf")."""
+    n = x.shape[1]
     mean = jnp.mean(x, axis=1)
     se = jnp.std(x, axis=1) / math.sqrt(max(n - 1, 1))
     ok = jnp.isfinite(mean)

@@ -86,7 +86,6 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from ..bcsdf import feather_fiber as ff
 from ..bcsdf import detectors
@@ -283,13 +282,7 @@ def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
         x = x * (_safe_inv(jnp.abs(wo_f.z)) * live)[:, None, None]
     else:
         x = x * (_safe_inv(1.0 - m.w_t) * live * (wo_f.z != 0))[:, None, None]
-    mean = jnp.mean(x, axis=1)
-    se = jnp.std(x, axis=1) / math.sqrt(max(n - 1, 1))
-    ok = jnp.isfinite(mean)
-    mean, se = jnp.where(ok, mean, 0.0), jnp.where(ok, se, 0.0)
-    if what == "pdf":
-        return mean[:, 0].reshape(shape), se[:, 0].reshape(shape)
-    return mean.reshape(shape + mean.shape[-1:]), se.reshape(shape + mean.shape[-1:])
+    return ff.offsets_mean(x, shape, what)
 
 
 def _eval(p: Params, wi: Vec3, wo: Vec3, key=None):
