@@ -211,3 +211,37 @@ def test_bad_input_names_the_parameter():
             ff.Params(**kw)
     with pytest.raises(ValueError, match="key"):
         ff.sample(ff.Params(), fiber_direction(0.3, 0.0), 3)
+
+
+def test_narrow_detectors_reproduce_the_tracers_random_walk_histogram():
+    """beta -> 0 (issue 21): the far-field histogram of feather_fiber.sample's weights (split-mode lobes,
+    the lobe choice by lum(A_k), the detectors, the weight S_h cos / pdf_h) equals flatland.trace_fiber's
+    random-mode histogram (one stochastic branch per path at every interface) for Fig. 5.7's barb with
+    its off-centre medulla: every (theta_o, phi_o) bin within 4.5 combined standard errors, and the
+    chi-square of all bins within its expectation. All lobes kept (K = max_events = 16) so that both
+    count the same light."""
+    from appearance_jax.flatland import trace_fiber
+
+    p = ff.Params(eccentricity=1.6, medulla=True, medulla_y=-0.1, medulla_z=0.1, beta_m=0.004, beta_n=0.004,
+                  n_lobes=16, max_events=16, sigma_a=FIG57_SIGMA, projected_width=False)  # the tracer: per path
+    wi = fiber_direction(THETA_I, 0.3)
+    n, nt, nph = 2**16, 13, 24  # no bin edge on the specular cone theta_o = -45 deg (the lobes sit there)
+    wo, w, _ = ff.sample(p, fiber_direction(jnp.full(n, THETA_I), jnp.full(n, 0.3)), jax.random.key(21))
+    th, ph = (np.asarray(a) for a in (jnp.arcsin(jnp.clip(wo.x, -1, 1)), jnp.arctan2(wo.z, wo.y)))
+    it = np.clip(((th + np.pi / 2) / np.pi * nt).astype(int), 0, nt - 1)
+    ip = np.clip(((ph + np.pi) / (2 * np.pi) * nph).astype(int), 0, nph - 1)
+    w = np.asarray(w)[:, 0]                                    # red
+    idx = it * nph + ip
+    s1 = np.bincount(idx, w, nt * nph) / n
+    var1 = (np.bincount(idx, w * w, nt * nph) / n - s1**2) / n
+    h = trace_fiber(ff.section(p), wi, jax.random.key(22), n, n_theta=nt, n_phi=nph, n_lobes=1, max_events=16,
+                    mode="random")
+    s2 = np.asarray(h.power)[0, ..., 0].ravel() / h.n_paths
+    var2 = (np.asarray(h.power_sq)[0, ..., 0].ravel() / h.n_paths - s2**2) / h.n_paths
+    se = np.sqrt(var1 + var2)
+    live = se > 0
+    z = (s1 - s2)[live] / se[live]
+    print(f"bins with light {live.sum()}, max |z| {np.abs(z).max():.2f}, chi2/dof {np.mean(z**2):.3f}, "
+          f"totals {s1.sum():.4f} vs {s2.sum():.4f}")
+    assert np.abs(z).max() < 4.5 and np.mean(z**2) < 1.0 + 5.0 * math.sqrt(2.0 / z.size)
+    assert live.sum() > 100 and abs(s1.sum() - s2.sum()) < 4.5 * math.sqrt(se[live].__pow__(2).sum()) + 1e-3
