@@ -305,7 +305,8 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     """One event and sample per direction of wi: ``(wo, weight (bands), pdf, event)``; event 0 barb,
     1 proximal, 2 distal barbule, 3 the delta (only where ``with_delta``, a traced bool: :func:`sample`
     and :func:`sample_events` run one compiled program)."""
-    (wi_s,), shape = _flat(wi)
+    shape = jnp.broadcast_shapes(jnp.shape(p.barb_angle), *(jnp.shape(c) for c in wi))
+    (wi_s,), _ = _flat(Vec3(*(jnp.broadcast_to(c, shape) for c in wi)))
     angle = jnp.broadcast_to(jnp.asarray(p.barb_angle), shape).reshape(-1)
     N = wi_s.x.shape[0]
     dtype = jnp.result_type(float)
