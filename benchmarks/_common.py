@@ -54,6 +54,19 @@ def best_time(fn, repeats):
     return min(ts)
 
 
+def first_and_best(fn, repeats):
+    """(wall time of the first call (trace + compile + run), best of ``repeats`` further calls)."""
+    t0 = time.perf_counter()
+    fn()
+    first = time.perf_counter() - t0
+    ts = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return first, min(ts)
+
+
 def best_times(runs, repeats):
     """Best wall time of each of ``runs`` (name -> callable) after a warm-up call each, the
     calls alternating so that a change in machine load affects them alike."""

@@ -24,19 +24,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import upper_hemisphere_pairs  # noqa: E402
-
-
-def best(fn, repeats):
-    t0 = time.perf_counter()
-    fn()
-    first = time.perf_counter() - t0
-    ts = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t0)
-    return first, min(ts)
+from _common import first_and_best as best, upper_hemisphere_pairs  # noqa: E402
 
 
 def main():
