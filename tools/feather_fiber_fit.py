@@ -42,7 +42,8 @@ def base_params(n_h):
 
 
 def grid(quick=False):
-    """(wi, wo) of the lat-long tables: theta_o x phi_o cell centres for each theta_i (phi_i = 0)."""
+    """(wi, wo) of the lat-long tables, (3, 1) and (1, K): theta_o x phi_o cell centres for each theta_i
+    (phi_i = 0)."""
     import jax.numpy as jnp
 
     from appearance_jax.core.frame import fiber_direction
@@ -51,9 +52,9 @@ def grid(quick=False):
     th = (np.arange(nt) + 0.5) / nt * math.pi - 0.5 * math.pi
     ph = (np.arange(nph) + 0.5) / nph * 2 * math.pi - math.pi
     T, P = (a.ravel() for a in np.meshgrid(th, ph, indexing="ij"))
-    ti = np.repeat(np.radians(THETA_I), T.size)
-    wi = fiber_direction(jnp.asarray(ti), jnp.zeros(ti.size))
-    wo = fiber_direction(jnp.asarray(np.tile(T, 3)), jnp.asarray(np.tile(P, 3)))
+    # incidences (3, 1) against cells (1, K): the fibre traces each incidence once
+    wi = fiber_direction(jnp.asarray(np.radians(THETA_I))[:, None], jnp.zeros((3, 1)))
+    wo = fiber_direction(jnp.asarray(T)[None, :], jnp.asarray(P)[None, :])
     return wi, wo
 
 
@@ -65,7 +66,7 @@ def table(n_h_data=256, quick=False, seed=7):
     S, se = ff.eval(base_params(n_h_data), wi, wo, key=seed)
     S, se = np.asarray(S), np.asarray(se)
     # a floor (0.1 % of the largest value) keeps cells that no offset's lobe reached (se = 0) finite
-    return wi, wo, S, np.maximum(se, 1e-3 * S.max())
+    return wi, wo, S, np.maximum(se, 1e-3 * S.max())  # (3, K, bands)
 
 
 def run(n_h_data=1024, n_h=256, free_size=False, quick=False, verbose=True):
@@ -132,7 +133,7 @@ def run(n_h_data=1024, n_h=256, free_size=False, quick=False, verbose=True):
     out = dict(labels=labels, x=x, sigma=err, truth=truth, corr=corr, chi2_dof=chi2, steps=int(steps),
                converged=bool(ok), flat=flat, flat_rel_sigma=float(np.sqrt(w[-1])), t_data=t_data, t_fit=t_fit)
     if verbose:
-        print(f"tables: {S.shape[0]} cells x 3 bands at theta_i = {THETA_I} deg, n_h = {n_h_data} (key 7); "
+        print(f"tables: {S.shape[0] * S.shape[1]} cells x 3 bands at theta_i = {THETA_I} deg, n_h = {n_h_data} (key 7); "
               f"fit n_h = {n_h} (key 3); {t_data:.1f} s for the tables, {t_fit:.1f} s for the fit "
               f"({int(steps)} LM steps, converged {bool(ok)}), chi2/dof = {chi2:.3f}")
         for k, name in enumerate(labels):

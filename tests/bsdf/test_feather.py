@@ -49,13 +49,13 @@ def wide():
     p = feather.Params(**WIDE)
     wo, W = sphere_rule(48, 96)
     n = wo.x.size
-    wi = Vec3(*(jnp.concatenate([jnp.full(n, float(getattr(_dir(*v), a))) for v in VIEWS]) for a in "xyz"))
-    wo2 = Vec3(*(jnp.concatenate([c, c]) for c in wo))
+    # the views (2, 1) against the rule (1, n): each view's masking and fibres are traced once
+    wi = _dir(np.array([[v[0]] for v in VIEWS]), np.array([[v[1]] for v in VIEWS]))
+    wo2 = Vec3(*(c[None, :] for c in wo))
     f, se = feather.eval(p, wi, wo2)
     pdf, _ = feather.pdf(p, wi, wo2)
-    shape = (2, n)
-    return dict(p=p, wo=wo, W=np.asarray(W), f=np.asarray(f).reshape(shape + (3,)),
-                se=np.asarray(se).reshape(shape + (3,)), pdf=np.asarray(pdf).reshape(shape))
+    assert np.shape(f) == (2, n, 3)
+    return dict(p=p, wo=wo, W=np.asarray(W), f=np.asarray(f), se=np.asarray(se), pdf=np.asarray(pdf))
 
 
 @pytest.mark.parametrize("view", [0, 1], ids=["above", "below"])

@@ -238,22 +238,44 @@ def _off_axis(wi: Vec3):
     return Vec3(jnp.where(ok, wi.x, 0.0), jnp.where(ok, wi.y, 1.0), jnp.where(ok, wi.z, 0.0)), ok
 
 
+def by_incidence(wi: Vec3, wo: Vec3):
+    """Pairs grouped by their incident direction: ``(wi_u, idx, wo_f, shape)`` with ``wi_u`` the M
+    directions of ``wi`` as given (broadcast among its own components only, flattened), ``idx`` (pairs,)
+    the index into them of every pair of the broadcast ``shape`` and ``wo_f`` (pairs,). The lobes depend on
+    wi and the offset only, so a Monte Carlo evaluator traces M directions, not every pair (a lat-long
+    table of one wi traces once)."""
+    shape = jnp.broadcast_shapes(*(jnp.shape(c) for d in (wi, wo) for c in d))
+    s_i = jnp.broadcast_shapes(*(jnp.shape(c) for c in wi))
+    wi_u = Vec3(*(jnp.broadcast_to(c, s_i).reshape(-1) for c in wi))
+    m = wi_u.x.shape[0]
+    idx = jnp.broadcast_to(jnp.arange(m).reshape((1,) * (len(shape) - len(s_i)) + s_i), shape).reshape(-1)
+    wo_f = Vec3(*(jnp.broadcast_to(c, shape).reshape(-1) for c in wo))
+    return wi_u, idx, wo_f, shape
+
+
 def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
     """Mean and standard error over n_h offsets of S_h (``what="eval"``) or pdf_h. Every pair traces the
-    same offsets with the same key (common random numbers across directions, medulla bounces included)."""
-    (wi_f, wo_f), shape = _flat_pairs(wi, wo)
+    same offsets with the same key (common random numbers across directions, medulla bounces included);
+    each distinct wi is traced once (:func:`by_incidence`)."""
+    wi_u, idx, wo_f, shape = by_incidence(wi, wo)
     n = p.n_h
     k_h, k_t = jax.random.split(_key(key))
     h = _offsets(p, k_h, n, jnp.result_type(float))
 
-    def one_pair(a: Vec3, b: Vec3):
+    def trace(a: Vec3):
         a, ok = _off_axis(a)
-        a, b = (Vec3(*(jnp.broadcast_to(c, (n,)) for c in v)) for v in (a, b))
-        lob = _lobes(p, a, h, k_t)
-        x = _lobe_sum(p, lob, a, b) if what == "eval" else _lobe_pdf(p, lob, b)[:, None]
-        return jnp.where(ok, x, 0.0)
+        a = Vec3(*(jnp.broadcast_to(c, (n,)) for c in a))
+        return _lobes(p, a, h, k_t), a, ok
 
-    return offsets_mean(jax.vmap(one_pair)(wi_f, wo_f), shape, what)
+    lob_u, a_u, ok_u = jax.vmap(trace)(wi_u)
+
+    def one_pair(i, b: Vec3):
+        lob, a = jax.tree_util.tree_map(lambda v: v[i], (lob_u, a_u))
+        b = Vec3(*(jnp.broadcast_to(c, (n,)) for c in b))
+        x = _lobe_sum(p, lob, a, b) if what == "eval" else _lobe_pdf(p, lob, b)[:, None]
+        return jnp.where(ok_u[i], x, 0.0)
+
+    return offsets_mean(jax.vmap(one_pair)(idx, wo_f), shape, what)
 
 
 def offsets_mean(x, shape, what):

@@ -243,45 +243,60 @@ def _safe_inv(x):
 
 
 def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
-    """Mean and standard error over n_h offsets per fibre of f (``"eval"``) or the sampler's density."""
-    angle = jnp.broadcast_to(jnp.asarray(p.barb_angle), jnp.broadcast_shapes(jnp.shape(p.barb_angle), *(
-        jnp.shape(c) for d in (wi, wo) for c in d)))
-    (wi_f, wo_f), shape = _flat(_rotate_z(wi, angle), _rotate_z(wo, angle))
+    """Mean and standard error over n_h offsets per fibre of f (``"eval"``) or the sampler's density. The
+    masking and the three fibres' lobes are computed once per distinct viewer direction (and barb angle)."""
+    # the barb angle turns both directions: it belongs to the viewer's side of the grouping
+    s_i = jnp.broadcast_shapes(jnp.shape(p.barb_angle), *(jnp.shape(c) for c in wi))
+    angle_i = jnp.broadcast_to(jnp.asarray(p.barb_angle), s_i)
+    wi_r = _rotate_z(Vec3(*(jnp.broadcast_to(c, s_i) for c in wi)), angle_i)
+    shape = jnp.broadcast_shapes(s_i, *(jnp.shape(c) for c in wo))
+    angle_o = jnp.broadcast_to(angle_i.reshape((1,) * (len(shape) - len(s_i)) + s_i), shape)
+    wi_u, idx, wo_f, shape = ff.by_incidence(wi_r, _rotate_z(Vec3(*(jnp.broadcast_to(c, shape) for c in wo)),
+                                                              angle_o))
     R = _frames(p)
-    m = _masking(p, wi_f, R)
+    m = _masking(p, wi_u, R)
     fib = fibres(p)
     n = p.n_h
     dtype = jnp.result_type(float)
     k_h, k_b, k_bb = jax.random.split(_key(key), 3)
     u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(k_h, (n,), dtype)) / n   # stratified, shared
 
-    def one_pair(a: Vec3, b: Vec3, weight, lo, hi):
-        x = 0.0
+    def trace(a: Vec3, lo, hi):
+        out = []
         for j in range(3):
             fp, key_j = (fib[0], k_b) if j == 0 else (fib[1], k_bb)
             aj, ok = ff.off_axis(_to(R[j], a))
+            aj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in aj))
+            out.append((ff.trace_lobes(fp, aj, lo[j] + (hi[j] - lo[j]) * u, key_j), aj, ok))
+        return out
+
+    traced = jax.vmap(trace, in_axes=(0, 1, 1))(wi_u, m.h_lo, m.h_hi)
+
+    def one_pair(i, b: Vec3):
+        x = 0.0
+        for j in range(3):
+            fp = fib[0] if j == 0 else fib[1]
+            lob, aj, ok = jax.tree_util.tree_map(lambda v: v[i], traced[j])
             # light along the fibre's axis: G = 0; a stand-in keeps the derivatives finite (the fibre
             # angles' asin and atan2 are singular there, and a rotation of the frame moves it)
             bj = _to(R[j], b)
             ok_o = 1.0 - bj.x * bj.x > _TINY
             bj = Vec3(jnp.where(ok_o, bj.x, 0.0), jnp.where(ok_o, bj.y, 1.0), jnp.where(ok_o, bj.z, 0.0))
-            ok = ok & ok_o
-            aj, bj = (Vec3(*(jnp.broadcast_to(c, (n,)) for c in v)) for v in (aj, bj))
-            lob = ff.trace_lobes(fp, aj, lo[j] + (hi[j] - lo[j]) * u, key_j)
+            bj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in bj))
             if what == "eval":
                 g = jnp.sqrt(jnp.maximum(1.0 - bj.x * bj.x, 0.0))                   # G_j(wo) = cos theta_o
                 xj = ff.lobe_value(fp, lob, aj, bj) * g[:, None]
             else:
                 xj = ff.lobe_density(fp, lob, bj)[:, None]
-            x = x + weight[j] * jnp.where(ok, xj, 0.0)
+            x = x + m.weight[j, i] * jnp.where(ok & ok_o, xj, 0.0)
         return x
 
-    x = jax.vmap(one_pair, in_axes=(0, 0, 1, 1, 1))(wi_f, wo_f, m.weight, m.h_lo, m.h_hi)   # (pairs, n, bands)
-    live = wi_f.z != 0
+    x = jax.vmap(one_pair)(idx, wo_f)                                              # (pairs, n, bands)
+    live = wi_u.z[idx] != 0
     if what == "eval":
         x = x * (_safe_inv(jnp.abs(wo_f.z)) * live)[:, None, None]
     else:
-        x = x * (_safe_inv(1.0 - m.w_t) * live * (wo_f.z != 0))[:, None, None]
+        x = x * (_safe_inv(1.0 - m.w_t[idx]) * live * (wo_f.z != 0))[:, None, None]
     return ff.offsets_mean(x, shape, what)
 
 
