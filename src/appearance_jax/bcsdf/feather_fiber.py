@@ -31,6 +31,11 @@ G_M truncated to [-pi/2, pi/2] and phi_o from G_N; its weight is S_h cos(theta_o
 same lobe set (unbiased for S cos(theta_o)); ``pdf`` is the stochastic mixture density over ``n_h``
 offsets (1/sr).
 
+Derivatives are those of the estimator at its fixed offsets and bounces (common random numbers): exact
+for eta, sigma_a, beta_m, beta_n and d_m. With a medulla, an offset switches between hitting and missing
+it as the medulla's size, position or the cortex's eccentricity change; the estimate is piecewise in
+those fields and its derivative omits the switches (docs/feathers.md, the fibre-fit stand-in).
+
 Geometry (spec D13, D17): fibre frame of :mod:`appearance_jax.core.frame` (x = fibre axis, the
 cross-section is the (y, z) plane, z = the vane normal); the cortex ellipse has semi-axis 1 along y and
 ``eccentricity`` = e >= 1 along z; lengths and sigma_a are per unit horizontal semi-axis. The medulla
