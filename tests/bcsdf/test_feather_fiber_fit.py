@@ -12,7 +12,7 @@ import pytest
 TOOL = pathlib.Path(__file__).resolve().parents[2] / "tools" / "feather_fiber_fit.py"
 
 
-@pytest.mark.slow  # ~80 s on 2 cores: 256 offsets per cell at every LM iterate
+@pytest.mark.slow  # ~45 s on 2 cores: 256 offsets per cell at every LM iterate
 def test_stand_in_recovers_the_absorption_and_the_red_medulla_albedo():
     spec = importlib.util.spec_from_file_location("feather_fiber_fit", TOOL)
     tool = importlib.util.module_from_spec(spec)
