@@ -34,9 +34,9 @@ def _lobe_albedo(p, wi):
     k_h, k_b, k_bb = jax.random.split(feather._key(None), 3)
     u = (jnp.arange(p.n_h) + jax.random.uniform(k_h, (p.n_h,), jnp.float64)) / p.n_h
     R = feather._frames(p)
+    barb, barbule = feather.fibres(p)
     out = 0.0
-    for j, (fp, key) in enumerate(zip((feather.fibres(p)[0], feather.fibres(p)[1], feather.fibres(p)[1]),
-                                      (k_b, k_bb, k_bb))):
+    for j, (fp, key) in enumerate(((barb, k_b), (barbule, k_bb), (barbule, k_bb))):
         wj = feather._to(R[j], wi)
         lob = ff.lobes(fp, wj, m.h_lo[j] + (m.h_hi[j] - m.h_lo[j]) * u, key=key)
         out = out + float(m.weight[j]) * np.asarray(lob.amplitude).sum(0)

@@ -82,7 +82,7 @@ from jax.scipy.special import ndtr
 from ..core.frame import fiber_angles, fiber_direction
 from ..core.model import Model, boundary
 from ..core.params import Bands, integer, param, params_class, Real, static, validate
-from ..core.rng import is_prng_key
+from ..core.rng import as_key, is_prng_key
 from ..core.spectral import luminance_or_mean
 from ..core.vec import as_directions, Vec3
 from ..flatland import geometry as G
@@ -191,9 +191,7 @@ def _lobes(p: Params, wi: Vec3, h, key) -> Lobes:
 
 
 def _key(key):
-    if key is None:
-        return jax.random.PRNGKey(_DEFAULT_KEY)
-    return jax.random.PRNGKey(key) if jnp.ndim(key) == 0 and not is_prng_key(key) else key  # an int seed
+    return as_key(key, _DEFAULT_KEY)
 
 
 def _flat_pairs(*dirs):
@@ -351,7 +349,7 @@ def _lobes_public(p: Params, wi: Vec3, h, key=None) -> Lobes:
 
 
 # for composing models (bsdf.feather): the lobes at given offsets, S_h and pdf_h of their lobe sets
-trace_lobes, lobe_value, lobe_density, off_axis, stratified_offsets = _lobes, _lobe_sum, _lobe_pdf, _off_axis, _offsets
+trace_lobes, lobe_value, lobe_density, off_axis = _lobes, _lobe_sum, _lobe_pdf, _off_axis
 eval = boundary(_eval, Params)
 pdf = boundary(_pdf, Params)
 lobes = boundary(_lobes_public, Params)

@@ -94,7 +94,8 @@ from ..bcsdf import feather_fiber as ff
 from ..bcsdf import detectors
 from ..core.model import Model, boundary
 from ..core.params import Bands, integer, param, params_class, Real, replace_unchecked, static, validate
-from ..core.rng import is_prng_key
+from ..core.frame import rotate_z
+from ..core.rng import as_key, is_prng_key
 from ..core.vec import as_directions, Vec3
 from . import feather_masking as masking
 
@@ -146,14 +147,9 @@ class Params:
 
 # ----------------------------------------------------------------------------------- frames and fibres
 
-def _rotate_z(w: Vec3, angle) -> Vec3:
-    """Coordinates of w in the frame turned by ``angle`` about z (the barb frame from the shading frame)."""
-    c, s = jnp.cos(angle), jnp.sin(angle)
-    return Vec3(c * w.x + s * w.y, -s * w.x + c * w.y, w.z)
-
-
-def _unrotate_z(w: Vec3, angle) -> Vec3:
-    return _rotate_z(w, -angle)
+def _to_barb(w: Vec3, angle) -> Vec3:
+    """Coordinates of w (shading frame) in the barb frame, turned by ``angle`` about the normal."""
+    return rotate_z(w, -angle)
 
 
 def barbule_frames(theta_bb, phi_bb):
@@ -170,11 +166,13 @@ def barbule_frames(theta_bb, phi_bb):
 
 
 def _to(R, w: Vec3) -> Vec3:
-    return Vec3(*(R[i, 0] * w.x + R[i, 1] * w.y + R[i, 2] * w.z for i in range(3)))
+    """w in the frame whose axes are the rows of R (3, 3), or of one R per direction (..., 3, 3)."""
+    return Vec3(*(R[..., i, 0] * w.x + R[..., i, 1] * w.y + R[..., i, 2] * w.z for i in range(3)))
 
 
 def _from(R, w: Vec3) -> Vec3:
-    return Vec3(*(R[0, i] * w.x + R[1, i] * w.y + R[2, i] * w.z for i in range(3)))
+    """The inverse of :func:`_to`."""
+    return Vec3(*(R[..., 0, i] * w.x + R[..., 1, i] * w.y + R[..., 2, i] * w.z for i in range(3)))
 
 
 def _frames(p: Params):
@@ -224,20 +222,13 @@ def _masking(p: Params, wb: Vec3, R) -> Masking:
 
 def _masking_public(p: Params, wi: Vec3) -> Masking:
     """The masking seen from ``wi`` (shading frame): :class:`Masking`."""
-    return _masking(p, _rotate_z(wi, p.barb_angle), _frames(p))
+    return _masking(p, _to_barb(wi, p.barb_angle), _frames(p))
 
 
 # ----------------------------------------------------------------------------------- estimators
 
 def _key(key):
-    if key is None:
-        return jax.random.PRNGKey(_DEFAULT_KEY)
-    return jax.random.PRNGKey(key) if jnp.ndim(key) == 0 and not is_prng_key(key) else key
-
-
-def _flat(*dirs):
-    shape = jnp.broadcast_shapes(*(jnp.shape(c) for d in dirs for c in d))
-    return [Vec3(*(jnp.broadcast_to(c, shape).reshape(-1) for c in d)) for d in dirs], shape
+    return as_key(key, _DEFAULT_KEY)
 
 
 def _safe_inv(x):
@@ -251,10 +242,10 @@ def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
     # the barb angle turns both directions: it belongs to the viewer's side of the grouping
     s_i = jnp.broadcast_shapes(jnp.shape(p.barb_angle), *(jnp.shape(c) for c in wi))
     angle_i = jnp.broadcast_to(jnp.asarray(p.barb_angle), s_i)
-    wi_r = _rotate_z(Vec3(*(jnp.broadcast_to(c, s_i) for c in wi)), angle_i)
+    wi_r = _to_barb(Vec3(*(jnp.broadcast_to(c, s_i) for c in wi)), angle_i)
     shape = jnp.broadcast_shapes(s_i, *(jnp.shape(c) for c in wo))
     angle_o = jnp.broadcast_to(angle_i.reshape((1,) * (len(shape) - len(s_i)) + s_i), shape)
-    wi_u, idx, wo_f, shape = ff.by_incidence(wi_r, _rotate_z(Vec3(*(jnp.broadcast_to(c, shape) for c in wo)),
+    wi_u, idx, wo_f, shape = ff.by_incidence(wi_r, _to_barb(Vec3(*(jnp.broadcast_to(c, shape) for c in wo)),
                                                               angle_o))
     R = _frames(p)
     m = _masking(p, wi_u, R)
@@ -324,11 +315,11 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     1 proximal, 2 distal barbule, 3 the delta (only where ``with_delta``, a traced bool: :func:`sample`
     and :func:`sample_events` run one compiled program)."""
     shape = jnp.broadcast_shapes(jnp.shape(p.barb_angle), *(jnp.shape(c) for c in wi))
-    (wi_s,), _ = _flat(Vec3(*(jnp.broadcast_to(c, shape) for c in wi)))
+    wi_s = Vec3(*(jnp.broadcast_to(c, shape).reshape(-1) for c in wi))
     angle = jnp.broadcast_to(jnp.asarray(p.barb_angle), shape).reshape(-1)
     N = wi_s.x.shape[0]
     dtype = jnp.result_type(float)
-    wb = _rotate_z(wi_s, angle)
+    wb = _to_barb(wi_s, angle)
     R = _frames(p)
     m = _masking(p, wb, R)
     fb, fbb = fibres(p)
@@ -343,10 +334,9 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     h = m.h_lo + (m.h_hi - m.h_lo) * uh[None]
     pick = lambda a: jnp.take_along_axis(a, sel[None], axis=0)[0]  # noqa: E731
     R_bb = R[sel]                                                                     # (N, 3, 3)
-    loc_bb = Vec3(*(R_bb[:, i, 0] * wb.x + R_bb[:, i, 1] * wb.y + R_bb[:, i, 2] * wb.z for i in range(3)))
     wo_b, wt_b, pdf_b = ff.sample_at(fb, wb, h[0], k_b)
-    wo_l, wt_l, pdf_l = ff.sample_at(fbb, loc_bb, pick(h), k_bb)
-    wo_bb = Vec3(*(R_bb[:, 0, i] * wo_l.x + R_bb[:, 1, i] * wo_l.y + R_bb[:, 2, i] * wo_l.z for i in range(3)))
+    wo_l, wt_l, pdf_l = ff.sample_at(fbb, _to(R_bb, wb), pick(h), k_bb)
+    wo_bb = _from(R_bb, wo_l)
     is_barb = event == 0
     wo = Vec3(*(jnp.where(is_barb, c1, c2) for c1, c2 in zip(wo_b, wo_bb)))
     weight = jnp.where(is_barb[:, None], wt_b, wt_l)
@@ -362,7 +352,7 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     live = (wi_s.z != 0) & (tot > 0) & (wo.z != 0)
     weight = jnp.where(live[:, None], weight, 0.0)
     pdf = jnp.where(live, pdf, 0.0)
-    wo = _unrotate_z(wo, angle)
+    wo = rotate_z(wo, angle)
     return (Vec3(*(c.reshape(shape) for c in wo)), weight.reshape(shape + weight.shape[-1:]), pdf.reshape(shape),
             event.reshape(shape))
 

@@ -154,7 +154,9 @@ def half_vector(wi: Vec3, wo: Vec3) -> Vec3:
     return h * flip
 
 
-def _rotate_z(v: Vec3, angle) -> Vec3:
+def rotate_z(v: Vec3, angle) -> Vec3:
+    """v turned by ``angle`` (radians, broadcasts) about z; ``rotate_z(v, -a)`` gives v's coordinates in
+    the frame turned by ``a``."""
     c, s = jnp.cos(angle), jnp.sin(angle)
     return Vec3(c * v.x - s * v.y, s * v.x + c * v.y, v.z)
 
@@ -168,7 +170,7 @@ def to_half_diff(wi: Vec3, wo: Vec3):
     """Rusinkiewicz angles ``(theta_h, phi_h, theta_d, phi_d)`` of a direction pair."""
     h = half_vector(wi, wo)
     theta_h, phi_h = spherical_angles(h)
-    d = _rotate_y(_rotate_z(wi, -phi_h), -theta_h)
+    d = _rotate_y(rotate_z(wi, -phi_h), -theta_h)
     theta_d, phi_d = spherical_angles(d)
     return theta_h, phi_h, theta_d, phi_d
 
@@ -176,7 +178,7 @@ def to_half_diff(wi: Vec3, wo: Vec3):
 def from_half_diff(theta_h, phi_h, theta_d, phi_d):
     """Inverse of :func:`to_half_diff`: returns ``(wi, wo)``."""
     d = spherical_direction(theta_d, phi_d)
-    wi = _rotate_z(_rotate_y(d, theta_h), phi_h)
+    wi = rotate_z(_rotate_y(d, theta_h), phi_h)
     h = spherical_direction(theta_h, phi_h)
     wo = reflect(wi, h)
     return wi, wo

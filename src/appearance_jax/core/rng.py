@@ -13,6 +13,14 @@ def is_prng_key(x) -> bool:
     return hasattr(x, "dtype") and x.dtype == jnp.uint32 and jnp.shape(x) == (2,)
 
 
+def as_key(key, default_seed: int):
+    """A PRNG key from ``key``: None gives ``PRNGKey(default_seed)`` (a Monte Carlo estimator's fixed
+    default: common random numbers), an integer seed its ``PRNGKey``, a key itself."""
+    if key is None:
+        return jax.random.PRNGKey(default_seed)
+    return jax.random.PRNGKey(key) if jnp.ndim(key) == 0 and not is_prng_key(key) else key
+
+
 def uniforms(u_or_key, shape, n: int, dtype=None):
     """Return a tuple of ``n`` uniform arrays of ``shape``.
 

@@ -99,7 +99,7 @@ def _vane(wy, wz, e_b, l_bb, theta_bb, w_bp, w_bd, key, n_rays, corner, copies):
     # the first barb met (barbules ignored): its offset h across the projected diameter
     kb = jnp.argmin(t_b, axis=1)
     met = jnp.isfinite(jnp.min(t_b, axis=1))
-    half = 0.5 * jnp.sqrt(dy * dy + (e_b * dx) ** 2)   # projected half width of a barb
+    half = G.half_width(dx, dy, 0.5, 0.5 * e_b, 0.0)   # projected half width of a barb
     h = (m - jnp.take(cx[0], kb) * dy) / half
     h_range = jnp.stack([jnp.min(jnp.where(met, h, jnp.inf)), jnp.max(jnp.where(met, h, -jnp.inf))])
     # truncated: the ray's crossing of the vane's band |y| <= height leaves the copies traced
