@@ -92,7 +92,7 @@ def main():
         cover = [float(masking_fraction(row, Vec3(0.0, (R[j] @ w)[1], abs((R[j] @ w)[2])), key, rays)[0])
                  for j in (1, 2)]
         r = vane_masking((w[1], w[2]), float(p.e_b), float(p.l_bb), float(p.theta_bb), cover[0], cover[1], key,
-                         n_rays=rays)
+                         n_rays=rays, barb_offsets=False)
         return float(r.weights[3])
 
     mc(views[0], jax.random.PRNGKey(0))  # compile

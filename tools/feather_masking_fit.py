@@ -65,7 +65,7 @@ def mc_transmission(rays=2**16, seed=0):
                 raise RuntimeError(f"view {np.degrees([th, ph])} deg: the barbule row is seen too close to its plane")
             cover.append(float(f))
         r = vane_masking((w[1], w[2]), E_B, TRUTH["l_bb"], TRUTH["theta_bb"], cover[0], cover[1],
-                         jax.random.fold_in(key, 3 * i), n_rays=rays)
+                         jax.random.fold_in(key, 3 * i), n_rays=rays, barb_offsets=False)
         wt.append(float(r.weights[3]))
         se.append(float(r.stderr[3]))
     return np.asarray(wt), np.asarray(se)

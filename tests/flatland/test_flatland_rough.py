@@ -257,7 +257,7 @@ def test_bad_input_names_the_parameter():
     with pytest.raises(ValueError, match="periodic"):
         fl.trace(fl.ellipse_row(2.0, 0.5, 0.5), fiber_direction(0.1, 1.0), jnp.array([0.0]))
     with pytest.raises(ValueError, match="wo.z"):
-        fl.masking_fraction(fl.ellipse_row(2.0, 0.5, 0.5), Vec3(0.0, 0.0, -1.0), KEY)
+        fl.masking_fraction(fl.ellipse_row(2.0, 0.5, 0.5), Vec3(0.0, 1.0, 0.0), KEY)
     with pytest.raises(ValueError, match="diffuse"):
         fl.trace(fl.fiber(1.5, medulla=(0, 0, 0.5, 0.5)), fiber_direction(0.1, 0.0), jnp.array([0.0]),
                  polarized=True)

@@ -51,7 +51,7 @@ def _two_scale_mc(p, wi, key):
             return None
         cover.append(float(f))
     r = vane.vane_masking((w[1], w[2]), float(p.e_b), float(p.l_bb), float(p.theta_bb), cover[0], cover[1],
-                          jax.random.fold_in(key, 3), n_rays=N, corner=p.corner)
+                          jax.random.fold_in(key, 3), n_rays=N, corner=p.corner, barb_offsets=False)
     return np.asarray(r.weights)
 
 

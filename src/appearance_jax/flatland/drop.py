@@ -27,7 +27,7 @@ totally reflected is ``valid`` = False for that ray (its power stays in family p
 
 ``foci`` (decision D-R3) counts where a ray and its neighbour in the fan cross, on each
 chord and on the outgoing half-line, from the forward-mode derivative of the trace with
-respect to s (:func:`appearance_jax.flatland.tracer._crossing`); ``axis`` counts the sign
+respect to s (:func:`appearance_jax.flatland.rays._crossing`); ``axis`` counts the sign
 changes of the transverse coordinate x . n_perp along the polyline hit points and the
 outgoing half-line (the axis through the centre along the incident direction; for the
 axisymmetric 3-D lift only).
@@ -52,7 +52,7 @@ from ..optics.fresnel import fresnel_amplitudes_complex, snell_cos_t
 from . import polar_curve as pcv
 from .fan import Fan
 from .polar_curve import PolarCurve
-from .tracer import _crossing
+from .rays import _crossing
 
 sg = jax.lax.stop_gradient
 

@@ -1,4 +1,4 @@
-"""Exact 2D geometry of cross-sections: rotated, offset ellipses and open elliptic arcs.
+"""Exact 2D geometry of cross-sections: rotated, offset ellipses, open elliptic arcs and segments.
 
 The cross-section plane is the fiber frame's (y, z) plane (:func:`core.frame.fiber_angles`:
 x is the fiber axis). A ray is a 2D origin ``(py, pz)`` and a 3D unit direction ``d``; its 2D
@@ -10,8 +10,12 @@ and a rotation ``psi`` of its first axis from +y towards +z. Its parametric angl
 puts the point at ``c + R(psi) (a cos gamma, b sin gamma)`` (Padrón Eq. B.3, App. B). An
 open arc keeps the points with ``gamma`` in ``[lo, lo + span]``.
 
+A segment has centre ``(cy, cz)``, half length ``a`` and direction ``psi`` (its points are
+``c + s (cos psi, sin psi)``, ``|s| <= a``); its normal is ``(-sin psi, cos psi)``.
+
 Self-intersection is excluded exactly instead of with epsilons: a ray leaving a shape starts
-on it, so one root of the quadratic is 0 and the other is ``-B/A`` (the sum of the roots).
+on it, so one root of the quadratic is 0 and the other is ``-B/A`` (the sum of the roots); a
+ray leaving a segment cannot meet it again.
 """
 
 from __future__ import annotations
@@ -142,3 +146,28 @@ def half_width(uy, uz, a, b, psi):
     """
     ey, ez = dir_to_local(uy, uz, psi)
     return jnp.sqrt(a * a * ez * ez + b * b * ey * ey)
+
+
+def intersect_segment(py, pz, dy, dz, cy, cz, a, psi, leaving):
+    """Nearest positive hit of the ray ``p + t (dy, dz)`` with a segment (centre, half length
+    ``a``, direction ``psi``): ``(t, hit)`` as :func:`intersect` (a ray along the segment's line
+    does not meet it; ``leaving``: the ray starts on it, so it cannot)."""
+    ey, ez = jnp.cos(psi), jnp.sin(psi)
+    den = dy * ez - dz * ey                       # cross(d, e)
+    ok = (den != 0) & ~leaving
+    inv = 1.0 / jnp.where(ok, den, 1.0)
+    wy, wz = cy - py, cz - pz
+    t = (wy * ez - wz * ey) * inv                 # cross(w, e) / cross(d, e)
+    s = (wy * dz - wz * dy) * inv                 # cross(w, d) / cross(d, e): along the segment
+    hit = ok & (t > 0) & (jnp.abs(s) <= a)
+    return jnp.where(hit, t, jnp.inf), hit
+
+
+def segment_normal(psi):
+    """Unit normal ``(ny, nz)`` of a segment of direction ``psi`` (its direction turned by +90 deg)."""
+    return -jnp.sin(psi), jnp.cos(psi)
+
+
+def segment_half_width(uy, uz, a, psi):
+    """Projected half width of a segment seen along the 2D unit direction ``(uy, uz)``."""
+    return a * jnp.abs(uy * jnp.sin(psi) - uz * jnp.cos(psi))

@@ -3,8 +3,8 @@
 A :class:`Section` is a small scene in the (y, z) plane of the fiber frame (x = fiber
 axis; :mod:`appearance_jax.core.frame`). It holds
 
-- ``shapes``: :class:`Shape` (an ellipse, or an open elliptic arc) each carrying an
-  :class:`Interface` and the ids of the regions on its inner and outer side;
+- ``shapes``: :class:`Shape` (an ellipse, an open elliptic arc, or a straight segment) each
+  carrying an :class:`Interface` and the ids of the regions on its inner and outer side;
 - ``media``: :class:`Medium` per region (region 0 is the exterior): refractive index and
   absorption coefficient per band (1/length, in the section's length unit);
 - ``period``: ``None`` for a bounded object, or the spacing along y of an infinite periodic
@@ -16,7 +16,8 @@ per unit radius (spec seed-001 §1.3.2).
 
 Builders: :func:`fiber` (a circular or elliptical cortex, optional cuticle roughness and
 tilt, optional off-centre medulla), :func:`cylinder` (a smooth dielectric cylinder, e.g.
-water), :func:`ellipse_row` (a periodic row of ellipses or arcs).
+water), :func:`ellipse_row` (a periodic row of ellipses or arcs), :func:`segment` (one straight
+segment, e.g. a row of barbules seen edge-on, for a custom :class:`Section`).
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ from ..core.params import check_value, ParamSpec
 BARBULE_KINDS = ("barbule", "saddle_mirror")
 INTERFACE_KINDS = ("dielectric", "diffuse", "film", "absorber") + BARBULE_KINDS
 DISTRIBUTIONS = ("ggx", "beckmann")
+GEOMETRIES = ("ellipse", "segment")
 
 
 def _f(x):
@@ -72,7 +74,14 @@ class Interface:
       ``beckmann``.
 
     Fields: roughness (alpha, [0, 1]), tilt (rad, (-pi/2, pi/2); positive tilts the mesonormal
-    towards +x), albedo (per band, [0, 1]), film_nm (nm), film_eta, wavelength_nm (nm, per band).
+    towards +x), albedo (per band, [0, 1]), film_nm (nm), film_eta, wavelength_nm (nm, per band),
+    coverage ([0, 1], default 1).
+
+    ``coverage`` < 1 makes the shape **semi-transparent**: a ray crossing it meets it (and the
+    interface acts) with probability ``coverage`` and passes straight on, untouched, otherwise; a
+    fresh coin is drawn for every crossing of every copy. This is a shape of which only the
+    fraction ``coverage`` is there, such as a row of barbules seen edge-on in a barb's
+    cross-section (Padrón's w'_bb, App. B.2.2). The coin is not differentiable in ``coverage``.
     """
 
     kind: str = "dielectric"
@@ -83,18 +92,22 @@ class Interface:
     film_eta: jax.Array = 1.33
     wavelength_nm: jax.Array = 550.0
     distribution: str = "ggx"
+    coverage: jax.Array = 1.0
 
-    _LEAVES = ("roughness", "tilt", "albedo", "film_nm", "film_eta", "wavelength_nm")
+    _LEAVES = ("roughness", "tilt", "albedo", "film_nm", "film_eta", "wavelength_nm", "coverage")
 
     def __post_init__(self):
-        # smooth vs rough selects code paths, so it is static: decided once from the concrete
-        # roughness (a traced roughness counts as rough)
-        r = self.roughness
+        # smooth vs rough and solid vs semi-transparent select code paths, so they are static:
+        # decided once from the concrete values (a traced value counts as rough / semi-transparent)
+        r, c = self.roughness, self.coverage
         rough = True if isinstance(r, jax.core.Tracer) else bool(np.any(np.asarray(r) != 0))
+        semi = True if isinstance(c, jax.core.Tracer) else bool(np.any(np.asarray(c) != 1))
         object.__setattr__(self, "_rough", rough)
+        object.__setattr__(self, "_semi", semi)
 
     def tree_flatten(self):
-        return tuple(getattr(self, k) for k in self._LEAVES), (self.kind, self.distribution, self._rough)
+        return (tuple(getattr(self, k) for k in self._LEAVES),
+                (self.kind, self.distribution, self._rough, self._semi))
 
     @classmethod
     def tree_unflatten(cls, aux, leaves):
@@ -104,6 +117,7 @@ class Interface:
         object.__setattr__(obj, "kind", aux[0])
         object.__setattr__(obj, "distribution", aux[1])
         object.__setattr__(obj, "_rough", aux[2])
+        object.__setattr__(obj, "_semi", aux[3])
         return obj
 
     @property
@@ -111,16 +125,26 @@ class Interface:
         """Static: False where the roughness was a concrete 0 (smooth interfaces are exact)."""
         return self._rough
 
+    @property
+    def semi_transparent(self) -> bool:
+        """Static: False where the coverage was a concrete 1 (no coin is drawn)."""
+        return self._semi
+
 
 @jax.tree_util.register_pytree_node_class
 @dataclass(frozen=True)
 class Shape:
-    """An ellipse (or open arc) in the section plane.
+    """An ellipse (or open arc), or a straight segment, in the section plane.
 
     centre (cy, cz), semi-axes a (along the shape's first axis) and b, rotation psi (rad) of
     the first axis from +y towards +z; ``arc = (lo, span)``: parametric angles kept (None =
     closed ellipse). ``inside``/``outside``: region ids on either side (static); an open arc
     has the same medium on both sides.
+
+    ``geometry = "segment"`` (static): the straight segment of half length ``a`` through the
+    centre along the first axis (``b`` is unused; :func:`segment` sets it to ``a``). Its normal
+    is the first axis turned by +90 degrees; it is open (``inside == outside``) and a ray meets
+    it at most once between events.
     """
 
     cy: jax.Array = 0.0
@@ -132,11 +156,12 @@ class Shape:
     inside: int = 1
     outside: int = 0
     arc: Optional[tuple] = None
+    geometry: str = "ellipse"
 
     def tree_flatten(self):
         arc = self.arc if self.arc is not None else (0.0, 2.0 * math.pi)
         return ((self.cy, self.cz, self.a, self.b, self.psi, self.interface, arc[0], arc[1]),
-                (self.inside, self.outside, self.arc is None))
+                (self.inside, self.outside, self.arc is None, self.geometry))
 
     @classmethod
     def tree_unflatten(cls, aux, ch):
@@ -146,11 +171,16 @@ class Shape:
         object.__setattr__(obj, "inside", aux[0])
         object.__setattr__(obj, "outside", aux[1])
         object.__setattr__(obj, "arc", None if aux[2] else (ch[6], ch[7]))
+        object.__setattr__(obj, "geometry", aux[3])
         return obj
 
     @property
     def closed(self) -> bool:
-        return self.arc is None
+        return self.arc is None and self.geometry == "ellipse"
+
+    @property
+    def is_segment(self) -> bool:
+        return self.geometry == "segment"
 
     def arc_range(self):
         return (0.0, 2.0 * math.pi) if self.arc is None else self.arc
@@ -219,6 +249,11 @@ class Section:
                 if not 0 <= r < n_regions:
                     raise ValueError(f"{lab}.{name} = {r} is not a region id; valid range "
                                      f"[0, {n_regions - 1}]")
+            if s.geometry not in GEOMETRIES:
+                raise ValueError(f"{lab}.geometry = {s.geometry!r}; valid: {GEOMETRIES}")
+            if s.is_segment and (s.arc is not None or s.inside != s.outside):
+                raise ValueError(f"{lab}: a segment is open: arc must be None and inside == outside "
+                                 f"(got arc = {s.arc}, inside = {s.inside}, outside = {s.outside})")
             check_value(f"{lab}.a", s.a, ParamSpec(0.0, math.inf, lo_open=True))
             check_value(f"{lab}.b", s.b, ParamSpec(0.0, math.inf, lo_open=True))
             itf = s.interface
@@ -231,6 +266,7 @@ class Section:
             lo_tilt = 0.0 if itf.kind in BARBULE_KINDS else -math.pi / 2  # theta_d > 0 there
             check_value(f"{lab}.interface.tilt", itf.tilt, ParamSpec(lo_tilt, math.pi / 2, True, True, "rad"))
             check_value(f"{lab}.interface.albedo", itf.albedo, ParamSpec(0.0, 1.0))
+            check_value(f"{lab}.interface.coverage", itf.coverage, ParamSpec(0.0, 1.0))
             check_value(f"{lab}.interface.film_nm", itf.film_nm, ParamSpec(0.0, math.inf, unit="nm"))
             check_value(f"{lab}.interface.wavelength_nm", itf.wavelength_nm,
                         ParamSpec(0.0, math.inf, lo_open=True, unit="nm"))
@@ -315,3 +351,15 @@ def ellipse_row(period, a, b, *, psi=0.0, arc=None, interface=None, copies=8,
                 arc=None if arc is None else (_f(arc[0]), _f(arc[1])))
     media = (Medium(_f(1.0), _f(0.0)),) if inside == 0 else (Medium(_f(1.0), _f(0.0)), Medium(_f(eta), _f(sigma_a)))
     return Section((shp,), media, _f(period), int(copies)).validate()
+
+
+def segment(p, q, interface=None, *, region: int = 0) -> Shape:
+    """The straight segment from ``p`` to ``q`` ((y, z) pairs, p != q) in region ``region`` (the
+    same on both sides), carrying ``interface`` (default an opaque absorber). Its normal is
+    (q - p) turned by +90 degrees (towards +z for p -> q along +y)."""
+    (py, pz), (qy, qz) = ((_f(v[0]), _f(v[1])) for v in (p, q))
+    half = 0.5 * jnp.hypot(qy - py, qz - pz)
+    check_value("flatland.segment half length |q - p| / 2", half, ParamSpec(0.0, math.inf, lo_open=True))
+    itf = interface if interface is not None else Interface("absorber")
+    return Shape(0.5 * (py + qy), 0.5 * (pz + qz), half, half, jnp.arctan2(qz - pz, qy - py), itf,
+                 inside=int(region), outside=int(region), geometry="segment")

@@ -16,6 +16,7 @@ circle D = 1. Angles follow :func:`core.frame.fiber_angles` (x = fiber axis).
 
 from __future__ import annotations
 
+import math
 from functools import partial
 from typing import NamedTuple
 
@@ -265,26 +266,57 @@ def nee_bcsdf(section: Section, wi: Vec3, wo: Vec3, key, n_paths: int = 2 ** 14,
     return _nee(section, wi, wo, key, n_chunks, chunk, int(n_lobes), int(max_events))
 
 
+class FirstHits(NamedTuple):
+    """What :func:`first_hits` returns (shape order of the section; the last class: no hit)."""
+
+    fraction: jax.Array   # (S + 1,): fractions of the rays whose first hit is shape i; last: none
+    stderr: jax.Array     # (S + 1,): their binomial standard errors
+    h_range: jax.Array    # (S, 2): min and max offset h at which rays first hit shape i (+inf, -inf: never)
+    truncated: jax.Array  # fraction of rays that may have needed more copies of a periodic row
+
+
 @partial(jax.jit, static_argnames=("n",))
-def _masking(section, wo, key, n):
+def _first_hits(section, wo, key, n):
     dtype = jnp.result_type(float)
     kh, kt = jax.random.split(key)
     rec = _trace(section, wo, _stratified_offsets(kh, n, dtype), kt, None, 1, "random", False, False)
-    hit = (rec.first_shape >= 0).astype(dtype)
-    m = jnp.mean(hit)
-    return m, jnp.sqrt(m * (1 - m) / max(n - 1, 1)), jnp.mean(rec.truncated.astype(dtype))
+    cls = jnp.where(rec.first_shape >= 0, rec.first_shape, len(section.shapes))
+    frac = jnp.stack([jnp.mean((cls == i).astype(dtype)) for i in range(len(section.shapes) + 1)])
+    se = jnp.sqrt(frac * (1 - frac) / max(n - 1, 1))
+    h_range = jnp.stack([jnp.stack([jnp.min(jnp.where(cls == i, rec.first_h, jnp.inf)),
+                                    jnp.max(jnp.where(cls == i, rec.first_h, -jnp.inf))])
+                         for i in range(len(section.shapes))])
+    return FirstHits(frac, se, h_range, jnp.mean(rec.truncated.astype(dtype)))
+
+
+def first_hits(section: Section, wo: Vec3, key, n_paths: int = 2 ** 16) -> FirstHits:
+    """What a viewer along ``wo`` sees first of a periodic row, per shape: the masking tallies
+    (spec seed-000 §5.2). Rays are launched towards -wo uniformly (stratified) over one period, from
+    above the row (wo.z > 0) or below it (wo.z < 0), and classified by the first shape they meet
+    (semi-transparent shapes by their coin: a ray that passes one is not stopped by it); for each shape
+    the range of the offsets h (across its projected width, to the left of the travel, as
+    :func:`launch`) at which rays meet it first. Each shape's fraction is the share of the row's
+    projected period where it is seen: Padrón's masking weights (App. B). Only the projection of ``wo``
+    on the section plane matters (it need not be a unit vector)."""
+    section = section.validate()
+    if not section.periodic:
+        raise ValueError("flatland.first_hits needs a periodic row (flatland.ellipse_row, or a Section "
+                         "with a period)")
+    check_int("flatland.first_hits.n_paths", n_paths, 1)
+    wy, wz = float(wo.y), float(wo.z)
+    if not (math.isfinite(wy) and math.isfinite(wz) and wz != 0):
+        raise ValueError(f"flatland.first_hits: wo = ({float(wo.x)}, {wy}, {wz}); the viewer must be above "
+                         "(wo.z > 0) or below (wo.z < 0) the row, not in its plane")
+    # what is hit first depends on the direction's projection on the section plane only
+    r = math.hypot(wy, wz)
+    d = Vec3(*(jnp.asarray(v, jnp.result_type(float)) for v in (0.0, wy / r, wz / r)))
+    return _first_hits(section, d, key, int(n_paths))
 
 
 def masking_fraction(section: Section, wo: Vec3, key, n_paths: int = 2 ** 16):
     """Fraction of the projected period of a periodic row covered by its shapes, seen from
-    ``wo`` (the barbule weight w'_bb of Padrón App. B, spec M23): rays are launched
-    uniformly over one period towards -wo and classified by their first hit. Returns
-    ``(fraction, stderr, truncated_fraction)``."""
-    section = section.validate()
-    if not section.periodic:
-        raise ValueError("flatland.masking_fraction needs a periodic row (flatland.ellipse_row)")
-    check_int("flatland.masking_fraction.n_paths", n_paths, 1)
-    if not float(wo.z) > 0:
-        raise ValueError(f"flatland.masking_fraction: wo.z = {float(wo.z)}; the viewer must be "
-                         "above the row (wo.z > 0)")
-    return _masking(section, wo, key, int(n_paths))
+    ``wo`` (the barbule weight w'_bb of Padrón App. B, spec M23): :func:`first_hits` summed over
+    the shapes. Returns ``(fraction, stderr, truncated_fraction)``."""
+    r = first_hits(section, wo, key, n_paths)
+    m = 1.0 - r.fraction[-1]
+    return m, r.stderr[-1], r.truncated

@@ -45,6 +45,7 @@ from ..core import vec as V
 from ..core.vec import Vec3
 from . import geometry as G
 from . import interfaces as I
+from .rays import _crossing, _default_field, check_direction  # noqa: F401  (check_direction: re-exported)
 from .section import BARBULE_KINDS, Section
 
 
@@ -62,6 +63,7 @@ class Records(NamedTuple):
     lost: jax.Array          # power killed by masking / validity tests, (N, bands)
     residual: jax.Array      # power still inside after max_events, (N, bands)
     first_shape: jax.Array   # index of the first shape hit (-1: none), (N,)
+    first_h: jax.Array       # offset h on that shape's projected width where it was hit (0: none), (N,)
     truncated: jax.Array     # periodic rows: a ray may have needed more copies, (N,)
 
 
@@ -89,14 +91,14 @@ def launch(section: Section, wi: Vec3, h):
 
     Bounded: ``h`` in [-1, 1] spans the projected width of the outer shape (B.8 with the
     weights fixed to (1 - h)/2, (1 + h)/2, seed-000 spec M22). Rows: ``h`` in [-1, 1) spans
-    one period on the line z = top of the row; rays must come from z > 0.
+    one period on the line above the row (wi.z > 0) or below it (wi.z < 0).
     """
     uy, uz = G.unit_2d(-wi.y, -wi.z)
     if section.periodic:
         top = _row_reach(section) * 1.0001
         P = section.period
         oy = (h + 1.0) * 0.5 * P
-        oz = jnp.broadcast_to(top, jnp.shape(oy))
+        oz = jnp.broadcast_to(jnp.where(wi.z < 0, -top, top), jnp.shape(oy))
         return (oy, oz), (0.5 * P * jnp.ones_like(oy), jnp.zeros_like(oy)), 0.5 * P
     o = section.outer()
     # an offset of exactly +-1 is a tangent ray (cos_i = 0 at the hit), where reverse-mode
@@ -143,6 +145,16 @@ def _uniforms_needed(section, mode):
     return (rough or tilted, rough, choice, diffuse, diffuse)
 
 
+def _coin_slots(section):
+    """Static: for each shape, the row of the per-event coin array its copies use (None: solid)."""
+    n_copies = 2 * section.copies + 1 if section.periodic else 1
+    slots, k = [], 0
+    for s in section.shapes:
+        slots.append(k if s.interface.semi_transparent else None)
+        k += n_copies if s.interface.semi_transparent else 0
+    return slots, k
+
+
 @partial(jax.jit, static_argnames=("max_events", "mode", "wave", "polarized", "nee"))
 def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False, wl=None):
     dtype = jnp.result_type(float)
@@ -156,7 +168,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
     eta0 = media_eta[0]
     periodic = section.periodic
     M = section.copies if periodic else 0
-    copies = range(-M, M + 1)
+    n_copies = 2 * M + 1
 
     (oy, oz), (toy, toz), _ = launch(section, wi, h)
     d = Vec3(*(jnp.broadcast_to(-c, (N,)).astype(dtype) for c in wi))
@@ -171,7 +183,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         fstate["E"] = E0
         tstate["E"] = Vec3(*(jnp.zeros_like(c) for c in E0))
     istate = dict(region=izeros, last=izeros - 1, last_copy=izeros, seg=izeros, foci=izeros,
-                  alive=jnp.ones((N,), bool), first=izeros - 1)
+                  alive=jnp.ones((N,), bool), first=izeros - 1, first_h=zeros)
     w = jnp.ones((N, nb), dtype)
     acc = dict(w=w, absorbed=jnp.zeros((N, nb), dtype), lost=jnp.zeros((N, nb), dtype),
                truncated=jnp.zeros((N,), bool))
@@ -181,27 +193,34 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         cy = s.cy + (k * section.period if periodic else 0.0)
         return cy, s.cz, s.a, s.b, s.psi
 
-    def core(f, ist, w, u):
+    slots, _ = _coin_slots(section)
+    is_seg = jnp.asarray([s.is_segment for s in shapes])
+
+    def core(f, ist, w, u, coins):
         """One event (differentiable in the float state ``f``)."""
         p_y, p_z, dd = f["py"], f["pz"], Vec3(f["dx"], f["dy"], f["dz"])
         k0 = jnp.round(p_y / section.period).astype(jnp.int32) if periodic else izeros
-        ts, ids, cps = [], [], []
+        # all copies of a shape at once: (copies, N) arrays, one traced intersection per shape
+        kk = k0[None, :] + jnp.arange(-M, M + 1, dtype=jnp.int32)[:, None]
+        P1 = lambda v: v[None, :]  # noqa: E731
+        ts = []
         for i in range(S):
             s = shapes[i]
             lo, span = s.arc_range()
-            for j in copies:
-                kk = k0 + j
-                cy, cz, a, b, psi = geometry_of(i, kk)
-                leaving = (ist["last"] == i) & ((ist["last_copy"] == kk) if periodic else True)
-                t, _ = G.intersect(p_y, p_z, dd.y, dd.z, cy, cz, a, b, psi, lo, span, leaving)
-                ts.append(t)
-                ids.append(i)
-                cps.append(kk)
-        T = jnp.stack(ts)
+            cy, cz, a, b, psi = geometry_of(i, kk)
+            leaving = P1(ist["last"] == i) & ((P1(ist["last_copy"]) == kk) if periodic else True)
+            if s.is_segment:
+                t, _ = G.intersect_segment(P1(p_y), P1(p_z), P1(dd.y), P1(dd.z), cy, cz, a, psi, leaving)
+            else:
+                t, _ = G.intersect(P1(p_y), P1(p_z), P1(dd.y), P1(dd.z), cy, cz, a, b, psi, lo, span, leaving)
+            if slots[i] is not None:  # semi-transparent: each crossing is there with probability coverage
+                t = jnp.where(coins[slots[i]:slots[i] + n_copies] < s.interface.coverage, t, jnp.inf)
+            ts.append(jnp.broadcast_to(t, kk.shape))
+        T = jnp.concatenate(ts)                               # (S copies, N): shape-major
         j_best = jnp.argmin(T, axis=0)
         t = jnp.min(T, axis=0)
-        sid = jnp.asarray(ids, jnp.int32)[j_best]
-        kcopy = _select(j_best, cps) if periodic else izeros
+        sid = (j_best // n_copies).astype(jnp.int32)
+        kcopy = jnp.take_along_axis(kk, (j_best % n_copies)[None, :], axis=0)[0] if periodic else izeros
         alive = ist["alive"]
         hit = alive & jnp.isfinite(t)
         t_s = jnp.where(hit, t, 0.0)
@@ -216,9 +235,16 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         # geometry at the hit (of the selected shape and copy)
         geo = [geometry_of(i, kcopy) for i in range(S)]
         cy, cz, a, b, psi = (_select(sid, [g[q] for g in geo]) for q in range(5))
-        n_y, n_z = G.normal_at(ny_, nz_, cy, cz, a, b, psi)
+        seg = is_seg[sid]
+        n_y, n_z = G.normal_at(ny_, nz_, cy, cz, jnp.where(seg, 1.0, a), jnp.where(seg, 1.0, b), psi)
+        s_y, s_z = G.segment_normal(psi)
+        n_y, n_z = jnp.where(seg, s_y, n_y), jnp.where(seg, s_z, n_z)
         n_out = Vec3(jnp.zeros_like(n_y), n_y, n_z)
         from_out = V.dot(dd, n_out) < 0
+        # the hit's offset across the shape's projected width, to the left of the travel (h of launch)
+        uy, uz = G.unit_2d(dd.y, dd.z)
+        half = jnp.where(seg, G.segment_half_width(uy, uz, a, psi), G.half_width(uy, uz, a, b, psi))
+        h_hit = ((ny_ - cy) * -uz + (nz_ - cz) * uy) / jnp.where(half > 0, half, 1.0)
 
         children = []
         for i, s in enumerate(shapes):
@@ -335,7 +361,8 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         ist_new = dict(region=jnp.where(hit, reg_c, region), last=jnp.where(hit, sid, ist["last"]),
                        last_copy=jnp.where(hit, kcopy, ist["last_copy"]),
                        seg=ist["seg"] + (hit & (region != 0)).astype(jnp.int32), foci=ist["foci"],
-                       alive=new_alive, first=jnp.where(ist["first"] < 0, jnp.where(hit, sid, -2), ist["first"]))
+                       alive=new_alive, first=jnp.where(ist["first"] < 0, jnp.where(hit, sid, -2), ist["first"]),
+                       first_h=jnp.where(ist["first"] < 0, jnp.where(hit, h_hit, 0.0), ist["first_h"]))
         emitted = (emit | escape) if not nee else hit
         aux = dict(ist=ist_new, w=w_next, w_emit=w_emit, emit=emitted, seg_emit=ist["seg"] + (
             hit & (region != 0)).astype(jnp.int32) * (~escape).astype(jnp.int32), opl_emit=opl_emit,
@@ -345,8 +372,12 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
 
     def body(carry, key_e):
         f, tf, ist, acc = carry
+        coins = None
+        if n_coins:  # (solid sections keep their random streams)
+            key_e, key_c = jax.random.split(key_e)
+            coins = jax.random.uniform(key_c, (n_coins, N), dtype)
         u = _event_uniforms(key_e, (N,), dtype, needed)
-        fn = lambda ff: core(ff, ist, acc["w"], u)
+        fn = lambda ff: core(ff, ist, acc["w"], u, coins)
         if wave:
             (f_new, em), (tf_new, tem), aux = jax.jvp(fn, (f,), (tf,), has_aux=True)
             # meridional foci on the chord just travelled: the transverse offset
@@ -367,27 +398,18 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         return (f_new, tf_new, ist_new, acc), rec
 
     needed = _uniforms_needed(section, mode)
+    n_coins = _coin_slots(section)[1]
     keys = jax.random.split(key, max_events)
     (f, tf, ist, acc), rec = jax.lax.scan(body, (fstate, tstate, istate, acc), keys)
     direction, weight, lobe, opl, foci, field = rec
     residual = jnp.where(ist["alive"][:, None], acc["w"], 0.0)
     return Records(direction, weight, lobe, opl, foci, field, h, acc["absorbed"], acc["lost"], residual,
-                   jnp.maximum(ist["first"], -1), acc["truncated"])
-
-
-def _crossing(f, tf, length, mask):
-    """1 where the neighbouring ray crosses this one at 0 < s < length along the segment."""
-    ny, nz = -f["dz"], f["dy"]                  # 2D normal of the direction (sign irrelevant)
-    a = tf["py"] * ny + tf["pz"] * nz           # transverse offset at s = 0
-    b = tf["dy"] * ny + tf["dz"] * nz           # its rate of change
-    ok = b != 0
-    s = jnp.where(ok, -a / jnp.where(ok, b, 1.0), -1.0)
-    return (mask & ok & (s > 0) & (s < length)).astype(jnp.int32)
+                   jnp.maximum(ist["first"], -1), ist["first_h"], acc["truncated"])
 
 
 def _row_reach(section):
     """Half height of the band |z| <= reach that holds every shape of a periodic row."""
-    return max(jnp.abs(s.cz) + jnp.maximum(s.a, s.b) for s in section.shapes)
+    return jnp.max(jnp.stack([jnp.abs(s.cz) + jnp.maximum(s.a, s.b) for s in section.shapes]))
 
 
 def _truncated(section, p_y, p_z, d, alive, region):
@@ -444,26 +466,3 @@ def trace(section: Section, wi: Vec3, h, key=None, *, max_events: int = 16, mode
             *(jnp.broadcast_to(jnp.asarray(c, jnp.complex64 if jnp.result_type(float) == jnp.float32
                                            else jnp.complex128), h.shape) for c in field))
     return _trace(section, wi, h, key, E0, max_events, mode, wave, polarized)
-
-
-def check_direction(label: str, w: Vec3) -> None:
-    """Eager check that a concrete direction is a single finite unit vector."""
-    comps = tuple(w)
-    if any(isinstance(c, jax.core.Tracer) for c in comps):
-        return
-    import numpy as np
-
-    v = np.array([np.asarray(c, float) for c in comps])
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or abs(np.linalg.norm(v) - 1.0) > 1e-4:
-        raise ValueError(f"{label} = {v.tolist()} must be one finite unit vector (|w| = 1), e.g. "
-                         "core.frame.fiber_direction(theta, phi)")
-
-
-def _default_field(wi: Vec3, N):
-    """Unit field perpendicular to the propagation -wi, as close to the fiber axis as
-    possible (TM for a cylinder at normal incidence: E parallel to the axis)."""
-    d = -wi
-    x = Vec3(jnp.ones(()), jnp.zeros(()), jnp.zeros(()))
-    e = V.normalize(x - d * V.dot(x, d))
-    cdt = jnp.complex64 if jnp.result_type(float) == jnp.float32 else jnp.complex128
-    return Vec3(*(jnp.broadcast_to(jnp.asarray(c, cdt), (N,)) for c in e))

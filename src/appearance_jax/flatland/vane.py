@@ -16,9 +16,11 @@ records the offset h (flatland's convention: across the projected diameter, to t
 travel) at which each ray meets the first barb on its way, barbule occlusion ignored, whose range is
 the barb's visible offset range of the masking.
 
-Ray-ellipse intersection is :func:`appearance_jax.flatland.geometry.intersect`; ray-segment intersection
-(:func:`segment_hit`) is flatland's segment primitive. Independent of the masking's interval solver,
-which cuts the screen into pieces and composites them analytically.
+The scene is a periodic :class:`~appearance_jax.flatland.section.Section` of flatland's general tracer
+(:func:`vane_section`: an absorbing ellipse and two semi-transparent absorbing segments, vane x = the
+section's y, vane y = its z), and the tallies are :func:`~appearance_jax.flatland.tallies.first_hits`; the
+barb's offset range comes from a second trace with the barbules removed (coverage 0). Independent of the
+masking's interval solver, which cuts the screen into pieces and composites them analytically.
 
 Example::
 
@@ -31,14 +33,15 @@ Example::
 
 from __future__ import annotations
 
-from functools import partial
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 
 from ..core.params import check_int
-from . import geometry as G
+from ..core.vec import Vec3
+from .section import Interface, Medium, Section, Shape, segment
+from .tallies import first_hits
 
 
 class VaneMasking(NamedTuple):
@@ -50,70 +53,28 @@ class VaneMasking(NamedTuple):
     truncated: jax.Array   # fraction of rays whose path through the vane runs past the copies traced
 
 
-def segment_hit(py, pz, dy, dz, p, q):
-    """Distance t > 0 along the ray ``(py, pz) + t (dy, dz)`` to the segment p-q (2-tuples) and whether
-    it crosses it (``inf`` and False otherwise; a ray along the segment does not cross it)."""
-    ey, ez = q[0] - p[0], q[1] - p[1]
-    den = dy * ez - dz * ey                          # cross(d, e)
-    ok = den != 0
-    inv = 1.0 / jnp.where(ok, den, 1.0)
-    wy, wz = p[0] - py, p[1] - pz
-    t = (wy * ez - wz * ey) * inv                    # cross(w, e) / cross(d, e)
-    s = (wy * dz - wz * dy) * inv                    # cross(w, d) / cross(d, e)
-    hit = ok & (t > 0) & (s >= 0) & (s <= 1)
-    return jnp.where(hit, t, jnp.inf), hit
-
-
-@partial(jax.jit, static_argnames=("n_rays", "corner", "copies"))
-def _vane(wy, wz, e_b, l_bb, theta_bb, w_bp, w_bd, key, n_rays, corner, copies):
-    dtype = jnp.result_type(float)
-    r = jnp.hypot(wy, wz)
-    dx, dy = wy / r, wz / r                            # the 2D view direction (x across, y normal)
+def vane_section(e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, copies: int = 24) -> Section:
+    """The barb cross-section of a vane (module docstring) as a periodic flatland :class:`Section`:
+    shapes (barb, proximal barbules, distal barbules), all absorbers, the barbule segments of coverage
+    ``w_bp`` and ``w_bd``; period X = 1 + 2 l_bb cos theta_bb; ``copies`` neighbours traced on each side."""
+    f = lambda v: jnp.asarray(v, jnp.result_type(float))  # noqa: E731
+    e_b, l_bb, theta_bb = f(e_b), f(l_bb), f(theta_bb)
     X = 1.0 + 2.0 * l_bb * jnp.cos(theta_bb)
-    cy = corner * l_bb * jnp.sin(theta_bb)
-    period = X * jnp.abs(dy)
-    k_m, k_u = jax.random.split(key)
-    u = (jnp.arange(n_rays, dtype=dtype) + jax.random.uniform(k_m, (n_rays,), dtype)) / n_rays
-    m = (u - 0.5) * period                             # screen coordinate along (dy, -dx)
-    height = 2.0 + e_b + 2.0 * l_bb                    # well above everything
-    depth = height / jnp.abs(dy)
-    py, pz = m * dy + depth * dx, -m * dx + depth * dy  # origins: m (dy, -dx) + depth (dx, dy)
-    ry, rz = -dx, -dy                                  # travel
-    k = jnp.arange(-copies, copies + 1, dtype=dtype)[None, :]
-    cx = k * X
-    P = lambda a: a[:, None]  # noqa: E731
-    t_b, _ = G.intersect(P(py), P(pz), ry, rz, cx, 0.0, 0.5, 0.5 * e_b, 0.0, 0.0, 2.0 * jnp.pi,
-                         jnp.zeros(cx.shape, bool))
-    zero = jnp.zeros_like(cx)
-    t_p, _ = segment_hit(P(py), P(pz), ry, rz, (cx + 0.5, zero), (cx + 0.5 * X, cy + zero))
-    t_d, _ = segment_hit(P(py), P(pz), ry, rz, (cx + 0.5 * X, cy + zero), (cx + X - 0.5, zero))
-    # semi-transparent barbules: an independent coin per crossing; the ray stops at the nearest stop
-    c_p, c_d = jax.random.uniform(k_u, (2,) + t_p.shape, dtype)
-    t_p = jnp.where(c_p < w_bp, t_p, jnp.inf)
-    t_d = jnp.where(c_d < w_bd, t_d, jnp.inf)
-    best = jnp.stack([jnp.min(t_b, axis=1), jnp.min(t_p, axis=1), jnp.min(t_d, axis=1)])   # (3, n)
-    stop = jnp.isfinite(jnp.min(best, axis=0))
-    kind = jnp.where(stop, jnp.argmin(best, axis=0), 3)
-    frac = jnp.stack([jnp.mean((kind == j).astype(dtype)) for j in range(4)])
-    se = jnp.sqrt(frac * (1.0 - frac) / max(n_rays - 1, 1))
-    # the first barb met (barbules ignored): its offset h across the projected diameter
-    kb = jnp.argmin(t_b, axis=1)
-    met = jnp.isfinite(jnp.min(t_b, axis=1))
-    half = G.half_width(dx, dy, 0.5, 0.5 * e_b, 0.0)   # projected half width of a barb
-    h = (m - jnp.take(cx[0], kb) * dy) / half
-    h_range = jnp.stack([jnp.min(jnp.where(met, h, jnp.inf)), jnp.max(jnp.where(met, h, -jnp.inf))])
-    # truncated: the ray's crossing of the vane's band |y| <= height leaves the copies traced
-    reach = jnp.abs(m * dy) + height * jnp.abs(dx / dy) + X
-    trunc = jnp.mean((reach > copies * X).astype(dtype))
-    return VaneMasking(frac, se, h_range, trunc)
+    c = (0.5 * X, corner * l_bb * jnp.sin(theta_bb))
+    barb = Shape(f(0.0), f(0.0), f(0.5), 0.5 * e_b, f(0.0), Interface("absorber"), inside=1, outside=0)
+    prox = segment((0.5, 0.0), c, Interface("absorber", coverage=f(w_bp)))
+    dist = segment(c, (X - 0.5, 0.0), Interface("absorber", coverage=f(w_bd)))
+    media = (Medium(f(1.0), f(0.0)), Medium(f(1.0), f(0.0)))
+    return Section((barb, prox, dist), media, X, int(copies)).validate()
 
 
 def vane_masking(w, e_b, l_bb, theta_bb, w_bp, w_bd, key, *, n_rays: int = 2**17, corner: int = 1,
-                 copies: int = 24) -> VaneMasking:
+                 copies: int = 24, barb_offsets: bool = True) -> VaneMasking:
     """Monte Carlo barb-scale masking of the vane seen along the 2D direction ``w`` = (x across the vane,
     y its normal; above or below, not in the vane plane): :class:`VaneMasking` (module docstring).
     ``e_b`` > 0, ``l_bb`` >= 0, ``theta_bb`` in [0, pi/2), ``w_bp``, ``w_bd`` in [0, 1] (the barbule
-    coverages), ``corner`` +1 or -1, ``copies`` barbs traced on each side."""
+    coverages), ``corner`` +1 or -1, ``copies`` barbs traced on each side. ``barb_offsets=False`` skips
+    the second trace that finds the barb's visible offset range (``h_range`` is then NaN)."""
     check_int("vane_masking.n_rays", n_rays, 1)
     check_int("vane_masking.copies", copies, 1)
     for name, v, lo, hi in (("e_b", e_b, 0.0, None), ("l_bb", l_bb, 0.0, None), ("w_bp", w_bp, 0.0, 1.0),
@@ -129,6 +90,13 @@ def vane_masking(w, e_b, l_bb, theta_bb, w_bp, w_bd, key, *, n_rays: int = 2**17
     wy, wz = (float(c) for c in w)
     if not wz != 0:
         raise ValueError(f"vane_masking: w = {tuple(w)}: the view must not lie in the vane plane (w_y != 0)")
-    f = lambda v: jnp.asarray(v, jnp.result_type(float))  # noqa: E731
-    return _vane(f(wy), f(wz), f(e_b), f(l_bb), f(theta_bb), f(w_bp), f(w_bd), key, int(n_rays), int(corner),
-                 int(copies))
+    r = (wy * wy + wz * wz) ** 0.5
+    wo = Vec3(jnp.asarray(0.0), jnp.asarray(wy / r), jnp.asarray(wz / r))
+    k_all, k_barb = jax.random.split(key)
+    seen = first_hits(vane_section(e_b, l_bb, theta_bb, w_bp, w_bd, corner=corner, copies=copies), wo,
+                      k_all, int(n_rays))
+    h_range = jnp.full((2,), jnp.nan)
+    if barb_offsets:  # the barb's visible offsets with the barbules ignored ([T:1369]): the row without them
+        h_range = first_hits(vane_section(e_b, l_bb, theta_bb, 0.0, 0.0, corner=corner, copies=copies), wo,
+                             k_barb, int(n_rays)).h_range[0]
+    return VaneMasking(seen.fraction, seen.stderr, h_range, seen.truncated)
