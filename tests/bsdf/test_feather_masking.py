@@ -188,3 +188,24 @@ def test_barb_masking_edges_and_bad_input():
         with pytest.raises(ValueError, match=match):
             fm.barb_masking(0.3, 0.9, args["e_b"], args["l_bb"], args["theta_bb"], args["w_bp"], args["w_bd"],
                             corner=corner)
+
+
+def test_padrons_single_occlusion_differs_only_in_the_corner_case():
+    """[T:1371]: Padrón approximates a ray's repeated barbule occlusions by one. With occlusions=1 the
+    weights (B.18-normalised) equal the exact ones wherever no ray crosses two barbule layers in front of
+    something: every view of the thesis' vane, whose barbs stand above the barbules. A steep inverted V
+    seen from below at ~65 deg has rays through two barbule rows, and there they differ (by 0.032)."""
+    ang = np.radians(np.linspace(-89.0, 89.0, 179))
+    for side in (1.0, -1.0):
+        wx, wy = np.sin(ang), side * np.cos(ang)
+        exact = np.array([np.asarray(v) for v in fm.barb_masking(wx, wy, 1.6, 1.0, 0.2618, 0.58, 0.58)[:4]])
+        one = np.array([np.asarray(v) for v in fm.barb_masking(wx, wy, 1.6, 1.0, 0.2618, 0.58, 0.58, occlusions=1)[:4]])
+        np.testing.assert_allclose(one, exact, atol=1e-12)
+    a = np.radians(114.5)
+    exact = np.array([float(v) for v in fm.barb_masking(np.sin(a), np.cos(a), 1.0, 0.5, 0.8, 0.9, 0.3, corner=-1)[:4]])
+    one = np.array([float(v) for v in fm.barb_masking(np.sin(a), np.cos(a), 1.0, 0.5, 0.8, 0.9, 0.3, corner=-1,
+                                                      occlusions=1)[:4]])
+    assert np.abs(one - exact).max() > 0.02
+    assert abs(one.sum() - 1.0) < 1e-12 and np.all(one >= 0)
+    with pytest.raises(ValueError, match="occlusions"):
+        fm.barb_masking(0.3, 0.9, 1.6, 1.0, 0.26, 0.5, 0.5, occlusions=0)

@@ -116,7 +116,8 @@ def _segment_hit(m, dx, dy, p, q):
     return dp + f * (dq - dp), (f > 0) & (f < 1)
 
 
-def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, copies: int = BARB_COPIES):
+def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, copies: int = BARB_COPIES,
+                 occlusions=None):
     """Barb masking (Padrón App. B.2.2, B.14-B.18; spec seed-000 M24, layout D9), exactly.
 
     In the barb cross-section (x across the vane, y its normal) barb k is an opaque ellipse centred
@@ -137,6 +138,11 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     order is constant there): exact up to views so close
     to the vane plane that a ray crosses more than ``copies`` periods (|wy| / |wx| < ~ (1 + e_b) /
     (2 copies X)). Branch-free; (wx, wy) scalars or arrays.
+
+    ``occlusions`` = n (an int; default None = exact) reproduces Padrón's simplification for comparison
+    [T:1371]: only the first n barbule layers in front of a crossing attenuate it (he approximates the
+    "infinite sequence of partial occlusions" at grazing views by one, n = 1), and the areas are then
+    normalised as in B.18.
     """
     _check("e_b", e_b, 0.0, True)
     _check("l_bb", l_bb, 0.0, False)
@@ -148,6 +154,8 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
         raise ValueError(f"feather_masking.barb_masking: theta_bb = {theta_bb!r} rad: valid range [0, pi/2)")
     if corner not in (1, -1):
         raise ValueError(f"feather_masking.barb_masking: corner = {corner!r}: +1 or -1")
+    if occlusions is not None and (int(occlusions) != occlusions or occlusions < 1):
+        raise ValueError(f"feather_masking.barb_masking: occlusions = {occlusions!r}: None (exact) or an integer >= 1")
     f = jnp.result_type(float)
     wx, wy, w_bp, w_bd = jnp.broadcast_arrays(*(jnp.asarray(v, f) for v in (wx, wy, w_bp, w_bd)))
     shape = wx.shape
@@ -184,12 +192,19 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     kd = kind[order]
     w_p, w_d = w_bp.reshape(-1, 1, 1), w_bd.reshape(-1, 1, 1)     # per direction
     cov = jnp.where(hit, jnp.where(kd == 0, 1.0, jnp.where(kd == 1, w_p, w_d)), 0.0)
-    trans = jnp.cumprod(1.0 - cov, axis=-1)
+    passing = 1.0 - cov
+    if occlusions is not None:  # Padrón's approximation [T:1371]: only the first barbule layers attenuate
+        barbule = hit & (kd != 0)
+        rank = jnp.cumsum(barbule, axis=-1) - barbule             # barbule layers in front of each crossing
+        passing = jnp.where(barbule & (rank >= occlusions), 1.0, passing)
+    trans = jnp.cumprod(passing, axis=-1)
     before = jnp.concatenate([jnp.ones_like(trans[..., :1]), trans[..., :-1]], axis=-1)
     seen = before * cov                                           # what each crossing contributes
     areas = [jnp.sum(jnp.sum(jnp.where(kd == j, seen, 0.0), axis=-1) * length, axis=-1) for j in range(3)]
     areas.append(jnp.sum(trans[..., -1] * length, axis=-1))
     tot = jnp.where(period[:, 0] > 0, period[:, 0], 1.0)
+    if occlusions is not None:  # B.18: normalise the projected areas (exactly, they sum to the period)
+        tot = jnp.where(period[:, 0] > 0, sum(areas), 1.0)
     grazing = period[:, 0] == 0                                   # in the vane plane: the barbs cover all
     w = [jnp.where(grazing, 1.0 if j == 0 else 0.0, v / tot).reshape(shape) for j, v in enumerate(areas)]
     _, h_lo, h_hi = barbule_masking(dx[:, 0], dy[:, 0], e_b, X - 1.0)
