@@ -41,9 +41,12 @@ fibre's visible range, the same offsets (and medulla bounces) for every directio
 one offset in its range, then the fibre's own sampler; its weight is (1 - w_t) x the fibre's S_h
 cos / pdf_h (unbiased for the part of f |wo . n| outside the delta), its pdf (P_j pdf_h) that of the
 drawn event and offset. ``pdf`` is sum_j w_j E_h[pdf_h,j] / (1 - w_t), that sampler's density.
-Derivatives: those of the estimator at its fixed offsets (common random numbers); the masking is
-continuous in its parameters, the fibres' caveat applies to e_b and the medulla's geometry
-(:mod:`~appearance_jax.bcsdf.feather_fiber`).
+The standard error is the offsets' sample error: where only one or two offsets' lobes reach a
+direction (medulla light, a lobe sweeping fast near grazing offsets) it is ~0 while the estimate is too
+low (measured: up to 12 reported sigma at n_h = 8); use n_h >= 64 (256 where the medulla dominates) for
+error bars (docs/feathers.md). Derivatives: those of the estimator at its fixed offsets (common random
+numbers); the masking is continuous in its parameters, the fibres' caveat applies to e_b and the
+medulla's geometry (:mod:`~appearance_jax.bcsdf.feather_fiber`).
 
 Units: lengths relative to the barb's width (masking, spec D9) and, inside a fibre, to its horizontal
 semi-axis (spec D17); sigma_a per unit semi-axis; angles in radians. Following Table 5.1 [T:912], a
