@@ -39,7 +39,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import warp
-from ..core.params import replace_unchecked, validate
+from ..core.params import replace_unchecked
 from ..core.vec import as_directions, Vec3
 from . import feather
 from .feather_texture import BACKGROUND, SHAFT, VANE
@@ -117,11 +117,11 @@ def eval(params, angle, mask, wi, wo, key=None, *, shaft_albedo=None):
     """f(wi, wo) of the texels ``(angle, mask)`` without the delta (1/sr, bands last) and its standard
     error (module docstring). ``shaft_albedo``: the rachis' diffuse albedo per band (default: the
     medulla's d_m); ``key``: the vane estimator's (default fixed)."""
-    validate(params, feather.Params)
     _check_albedo(shaft_albedo)
     angle, mask = _texels(angle, mask)
     wi, wo = as_directions(wi=wi, wo=wo)
-    # (key only when given: an explicit None is another signature of feather.eval's compiled program)
+    # feather.eval validates the parameters; the key is passed only when given (an explicit None is
+    # another signature of feather.eval's compiled program: a second compile)
     f, se = feather.eval(replace_unchecked(params, barb_angle=angle), wi, wo, *(() if key is None else (key,)))
     return _dispatch_eval(params, mask, f, se, wi, wo, shaft_albedo)
 
@@ -129,18 +129,18 @@ def eval(params, angle, mask, wi, wo, key=None, *, shaft_albedo=None):
 def transmission(params, angle, mask, wi):
     """The mass of the straight-through delta wo = -wi per texel: the vane's w_t(wi), 0 on the shaft,
     1 on the background (0 for a grazing wi)."""
-    validate(params, feather.Params)
     angle, mask = _texels(angle, mask)
     (wi,) = as_directions(wi=wi)
+    # (feather.transmission validates the parameters)
     return _dispatch_transmission(mask, feather.transmission(replace_unchecked(params, barb_angle=angle), wi), wi)
 
 
 def sample_events(params, angle, mask, wi, key, *, shaft_albedo=None):
     """``(wo, weight, event)`` per texel: E[weight g(wo)] = int f |wo . n| g dwo + transmission g(-wi) for
     any g (module docstring; events 0-3 as ``feather.sample_events``, 4 = the shaft's diffuse bounce)."""
-    validate(params, feather.Params)
     _check_albedo(shaft_albedo)
     angle, mask = _texels(angle, mask)
-    wi = feather._checked(params, wi, key, "feather_surface.sample_events")
-    wo, w, ev = feather.sample_events(replace_unchecked(params, barb_angle=angle), wi, key)
+    wi = feather._checked(params, wi, key, "feather_surface.sample_events")  # validates the parameters
+    # feather.sample_events' compiled program, without checking the same arguments again
+    wo, w, _, ev = feather._draw_jit(replace_unchecked(params, barb_angle=angle), wi, key, True)
     return _dispatch_sample(params, mask, wi, wo, w, ev, key, shaft_albedo)
