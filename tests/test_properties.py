@@ -19,6 +19,7 @@ and ``test_registry_loads`` fails.
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
 from dataclasses import dataclass, field
 
@@ -225,7 +226,10 @@ SLOW_GRID: dict[str, list[Case]] = {
                     for a in (1.0, 0.5, 0.3) for t in (0.0, 0.6, 1.4)]
     + [Case(name, dict(preset=name), lossless=True, opts=_FINE) for name in ("dewy1", "matte1")],
     "cosmetics": [Case(name, dict(preset=name)) for name in ("dewy2", "matte1", "matte2")],
-    "cosmetics_ordinates": [Case(name, dict(preset=name)) for name in ("dewy1", "matte2")],
+    # the presets' eta = 1 is the domain's end: central differences there straddle it and W(eta) has an
+    # s^(3/2) term (tests/layered/test_ordinates.py checks the right derivative at 1); matte2 moves inside
+    "cosmetics_ordinates": [Case("dewy1", dict(preset="dewy1"), opts={"skip": ("gradients",)}),
+                            Case("matte2_eta1.4", dict(preset="matte2", eta=1.4))],
     "cloth": [Case(name, dict(importlib.import_module("appearance_jax.bsdf.cloth.presets").kwargs(name),
                               n_samples=16), opts=_FINE)
               for name in ("linen_plain", "silk_crepe_de_chine", "silk_shot", "polyester_satin_back", "velvet")]
@@ -282,8 +286,8 @@ def _setup(name, case):
         pytest.skip(f"{name} is a Monte Carlo estimator: its statistical property tests live in "
                     "tests/bsdf/test_cosmetics.py and tests/layered/test_random_walk.py")
     kw = dict(case.params)
-    if "preset" in kw:
-        return model, model.presets[kw.pop("preset")]
+    if "preset" in kw:  # a preset, with any other fields replaced
+        return model, dataclasses.replace(model.presets[kw.pop("preset")], **kw)
     return model, model.Params(**kw)
 
 
