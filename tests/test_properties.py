@@ -259,7 +259,11 @@ SLOW_GRID: dict[str, list[Case]] = {
                           for g in (-0.95, -0.5, 0.3, 0.95)],
     "hg_mixture": [Case(name, dict(preset=name), lossless=True) for name in ("dewy1", "dewy2", "matte1")]
     + [Case("opposed", dict(w_g=0.3, g1=0.95, g2=-0.95), lossless=True, opts=_PEAKED)],
-    "mie": [Case(name, dict(preset=name), lossless=True, opts=_PEAKED) for name in ("rayleigh", "fog")]
+    # fog (x up to 40): the phase function ripples in r and lambda, so central differences at the default
+    # step carry an h^2 (third derivative) error of 1.2e-4; 6e-7 at step 1e-6 and 7e-9 at 1e-7: AD is right
+    "mie": [Case(name, dict(preset=name), lossless=True,
+                 opts={**_PEAKED, "gradients": dict(step=1e-6)} if name == "fog" else _PEAKED)
+            for name in ("rayleigh", "fog")]
     + [Case("glass_x20", dict(radius_um=2.0, wavelength_nm=600.0, n_particle=1.5), lossless=True, opts=_PEAKED)],
     # narrow lobes (a 0.03 rad bow-like one), symmetric about wi
     "tabulated_phase": [Case("two_lobes_rgb", dict(preset="two_lobes_rgb"), lossless=True,
@@ -398,7 +402,7 @@ def _gradients(model, params, case, scale=1):
     # forward program would be a second compile, and the backward pass at 32 pairs costs little
     value_and_grad = jax.jit(jax.value_and_grad(functional))
     testing.assert_gradients(lambda p: value_and_grad(p)[0], params, name=model.name,
-                             grad_fn=lambda p: value_and_grad(p)[1])
+                             grad_fn=lambda p: value_and_grad(p)[1], **case.opts.get("gradients", {}))
 
 
 CHECKS = {"reciprocity": _reciprocity, "furnace": _furnace, "sampling": _sampling, "chi2": _chi2,
