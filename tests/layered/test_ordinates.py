@@ -238,8 +238,8 @@ def test_interface_weights_are_exact_and_differentiable_at_eta_one():
     (no interface), W = 0 and the derivative is the right derivative, checked two ways: the
     closed form 2 pi (7/6) l_j(0), and the one-sided differences of the adaptive quadrature
     extrapolated to h -> 0 (W has an s^(3/2) term, s = 1 - 1/eta^2, so the differences carry
-    sqrt(h) and h errors, removed by Richardson steps; the plain difference at h = 1e-6 is 5 % off). Before the fix the derivative at eta = 1
-    was 0: a fit started at the default eta = 1 could not leave it."""
+    sqrt(h) and h errors, removed by Richardson steps; the plain difference at h = 1e-6 is 5 % off).
+    Before the fix the derivative at exactly eta = 1, the default, was 0."""
     from scipy.integrate import quad
 
     nodes, _ = np.polynomial.legendre.leggauss(12)
