@@ -166,7 +166,8 @@ def barb_masking(wx, wy, e_b, l_bb, theta_bb, w_bp, w_bd, *, corner: int = 1, co
     k = jnp.arange(-copies, copies + 1, dtype=f)[None, :]
     cx = k * X
     # primitives (per copy): barb ellipse, proximal segment p0-c, distal segment c-p1
-    p0, c, p1 = (cx + 0.5, jnp.zeros_like(cx)), (cx + 0.5 * X, cy + jnp.zeros_like(cx)), (cx + X - 0.5, jnp.zeros_like(cx))
+    zero = jnp.zeros_like(cx)
+    p0, c, p1 = (cx + 0.5, zero), (cx + 0.5 * X, cy + zero), (cx + X - 0.5, zero)
     half = 0.5 * projected_width(dx, dy, e_b)  # of a barb
     # the screen is periodic (period X |w_y|): every copy's silhouette and segment ends fall, modulo the
     # period, on those of the central copy, so its five ends cut one period into at most six pieces
