@@ -19,7 +19,6 @@ and ``test_registry_loads`` fails.
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
 from dataclasses import dataclass, field
 
@@ -291,7 +290,7 @@ def _setup(name, case):
                     "tests/bsdf/test_cosmetics.py and tests/layered/test_random_walk.py")
     kw = dict(case.params)
     if "preset" in kw:  # a preset, with any other fields replaced
-        return model, dataclasses.replace(model.presets[kw.pop("preset")], **kw)
+        return model, model.presets[kw.pop("preset")].replace(**kw)
     return model, model.Params(**kw)
 
 

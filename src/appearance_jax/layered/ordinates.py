@@ -79,7 +79,7 @@ from ..core.model import with_bands
 from ..core.quadrature import gauss_legendre
 from ..core.special import atan2, safe_sqrt
 from ..core.vec import Vec3
-from ..optics.fresnel import fresnel_dielectric
+from ..optics.fresnel import fresnel_dielectric, interface_amplitudes
 from . import medium as med
 from . import ordinates_tilt
 from .kernel_ops import add, doubled_slab, left, resolvent, right
@@ -275,12 +275,10 @@ def _interface_weights(nodes, eta, dtype, n_fine: int = 48):
     t = jnp.concatenate([t1 * xf, t1 + (1.0 - t1) * xf])
     wt = jnp.concatenate([t1 * wf, (1.0 - t1) * wf])
     mu = safe_sqrt(s + (1.0 - s) * t * t)
-    r = safe_sqrt(1.0 - s) * t  # the outside cosine / eta
-    # at s = 0 the first part of the rule has t = mu = r = 0 (and zero weights): no 0/0 there
-    ds, dp = mu + r, mu + eta * eta * r
-    rs = (mu - r) / jnp.where(ds > 0, ds, 1.0)
-    rp = (mu - eta * eta * r) / jnp.where(dp > 0, dp, 1.0)
-    F = 0.5 * (rs * rs + rp * rp)
+    # q = eta cos on each side: eta mu inside, the outside cosine eta sqrt(1 - s) t outside (at s = 0
+    # the first part of the rule has t = mu = 0, and zero weights: the helper returns r = 0 there)
+    rs, rp, _, _ = interface_amplitudes(eta * mu, eta * safe_sqrt(1.0 - s) * t, eta, 1.0)
+    F = 0.5 * jnp.real(rs * jnp.conj(rs) + rp * jnp.conj(rp))
     x = jnp.concatenate([mu_c * xf, mu])
     w = jnp.concatenate([s * wf * xf, (1.0 - s) * wt * t * F])  # F mu dmu = F (1 - s) t dt
     W = 2.0 * np.pi * jnp.einsum("f,fj->j", w, _lagrange(x, nodes))
