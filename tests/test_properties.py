@@ -283,11 +283,17 @@ SLOW_CASES = _cases(SLOW_GRID)
 N_CHI2 = len(CASES)  # Sidak correction over the chi-square tests of the default run
 
 
+# where the Monte Carlo estimators' statistical property tests live (standard-error tolerances)
+_MC_TESTS = {"cosmetics": "tests/bsdf/test_cosmetics.py and tests/layered/test_random_walk.py",
+             "feather": "tests/bsdf/test_feather.py", "feather_fiber": "tests/bcsdf/test_feather_fiber.py",
+             "huang_hair": "tests/bcsdf/test_huang_hair.py and tests/bcsdf/test_huang_sampling.py"}
+
+
 def _setup(name, case):
     model = MODELS[name]
     if model.stochastic:
         pytest.skip(f"{name} is a Monte Carlo estimator: its statistical property tests live in "
-                    "tests/bsdf/test_cosmetics.py and tests/layered/test_random_walk.py")
+                    f"{_MC_TESTS.get(name, 'its own test file')}")
     kw = dict(case.params)
     if "preset" in kw:  # a preset, with any other fields replaced
         return model, model.presets[kw.pop("preset")].replace(**kw)

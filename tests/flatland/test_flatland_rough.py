@@ -167,6 +167,49 @@ def test_diffuse_medulla_conserves_energy_in_expectation_and_leaves_the_cone():
                                atol=1e-12)
 
 
+def test_a_shape_switched_off_as_data_is_not_there():
+    """Shape.present: with the medulla switched off (a traced False) a fiber traces as the same fiber
+    without it, values and d/d(sigma_a), with the same key, in the one program that traces it switched on
+    (which equals the plain medulla fiber). bsdf.feather runs its barbules this way."""
+    from dataclasses import replace
+    wi = fiber_direction(0.4, 0.3)
+    n = 256
+    h = (jnp.arange(n) + 0.5) / n * 2 - 1
+    sig = jnp.asarray([0.2, 0.5, 1.0])
+
+    def sec(sigma_a, medulla=True):
+        s = fl.fiber(1.55, sigma_a, medulla=(0.1, -0.1, 0.5, 0.5) if medulla else None, medulla_albedo=0.7)
+        return s
+
+    def total(sigma_a, present):
+        s = sec(sigma_a)
+        s = replace(s, shapes=(s.shapes[0], replace(s.shapes[1], present=present)))
+        r = fl.trace(s, wi, h, KEY, max_events=12)
+        return jnp.sum(r.weight[..., 0] * r.direction.y), r
+
+    f = jax.jit(jax.value_and_grad(total, has_aux=True))
+    (v_on, r_on), g_on = f(sig, jnp.asarray(True))
+    (v_off, r_off), g_off = f(sig, jnp.asarray(False))
+    assert f._cache_size() == 1
+
+    def plain(sigma_a, medulla):
+        r = fl.trace(sec(sigma_a, medulla), wi, h, KEY, max_events=12)
+        return jnp.sum(r.weight[..., 0] * r.direction.y), r
+
+    for (v, r), g, medulla in (((v_on, r_on), g_on, True), ((v_off, r_off), g_off, False)):
+        (v_ref, r_ref), g_ref = jax.value_and_grad(plain, has_aux=True)(sig, medulla)
+        np.testing.assert_allclose(np.asarray(r.weight), np.asarray(r_ref.weight), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(np.asarray(r.absorbed), np.asarray(r_ref.absorbed), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(float(v), float(v_ref), rtol=1e-12)
+        np.testing.assert_allclose(np.asarray(g), np.asarray(g_ref), rtol=1e-10, atol=1e-14)
+        assert np.all(np.isfinite(np.asarray(g)))
+    # the medulla matters here (else the test could not tell the two apart)
+    assert abs(float(v_on) - float(v_off)) > 1e-3 * abs(float(v_off))
+    with pytest.raises(ValueError, match=r"shapes\[1\]\.present = 2"):
+        s = sec(sig)
+        fl.trace(replace(s, shapes=(s.shapes[0], replace(s.shapes[1], present=2))), wi, h, KEY)
+
+
 def test_gradients_of_crn_estimates_match_finite_differences():
     """Forward-mode autodiff of the next-event estimate (common random numbers) w.r.t.
     (roughness, tilt, sigma_a). R has no random choice: autodiff == central differences of

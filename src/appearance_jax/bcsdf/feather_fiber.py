@@ -150,8 +150,10 @@ def check_medulla(label, eccentricity, a, b, y, z):
             f"(semi-axes 1, eccentricity = {eccentricity}): shrink it or move its centre")
 
 
-def section(p: Params) -> Section:
-    """The cross-section traced by :func:`lobes`: the cortex (and the medulla when ``p.medulla``)."""
+def section(p: Params, medulla_present=None) -> Section:
+    """The cross-section traced by :func:`lobes`: the cortex (and the medulla when ``p.medulla``).
+    ``medulla_present``: None, or a traced bool that removes the medulla as data (``Shape.present``), so a
+    barb and its barbules run one compiled trace (``bsdf.feather``)."""
     f = lambda v: jnp.asarray(v, dtype=jnp.result_type(float))  # noqa: E731
     cortex = Shape(f(0.0), f(0.0), f(1.0), f(p.eccentricity), f(0.0), Interface("dielectric"), inside=1, outside=0)
     media = [Medium(f(1.0), f(0.0)), Medium(f(p.eta), f(p.sigma_a))]
@@ -159,7 +161,8 @@ def section(p: Params) -> Section:
     if p.medulla:
         media.append(Medium(f(p.eta), f(0.0)))
         shapes.append(Shape(f(p.medulla_y), f(p.medulla_z), f(p.medulla_a), f(p.medulla_b), f(0.0),
-                            Interface("diffuse", albedo=f(p.medulla_albedo)), inside=2, outside=1))
+                            Interface("diffuse", albedo=f(p.medulla_albedo)), inside=2, outside=1,
+                            present=medulla_present))
     return Section(tuple(shapes), tuple(media))
 
 
@@ -175,9 +178,9 @@ class Lobes(NamedTuple):
     discarded: jax.Array   # power in lobes after the K-th, or still inside after max_events, (N, bands)
 
 
-def _lobes(p: Params, wi: Vec3, h, key) -> Lobes:
+def _lobes(p: Params, wi: Vec3, h, key, medulla_present=None) -> Lobes:
     """Trace rays (wi and h of shape (N,)) and keep each ray's first n_lobes emissions."""
-    sec = section(p)
+    sec = section(p, medulla_present)
     rec = tracer._trace(sec, wi, h, key, None, p.max_events, "split", False, False)
     emitted = jnp.any(rec.weight > 0.0, axis=-1)                           # (E, N)
     kept = emitted & (jnp.cumsum(emitted.astype(jnp.int32), axis=0) <= p.n_lobes)
@@ -305,15 +308,16 @@ def _pdf(p: Params, wi: Vec3, wo: Vec3, key=None):
     return _estimate(p, wi, wo, key, "pdf")
 
 
-def sample_at(p: Params, wi: Vec3, h, key):
+def sample_at(p: Params, wi: Vec3, h, key, medulla_present=None):
     """One sample per ray of flat ``wi`` (N,) launched at offsets ``h`` (N,): ``(wo, weight, pdf_h)`` with
     weight = S_h cos(theta_o) / pdf_h (bands) for the lobe set of that offset (zero where nothing left).
-    For composing models (``bsdf.feather``) that choose the offsets; :func:`sample` draws them."""
+    For composing models (``bsdf.feather``) that choose the offsets; :func:`sample` draws them.
+    ``medulla_present``: as in :func:`section`."""
     N = wi.x.shape[0]
     dtype = jnp.result_type(float)
     k_t, k_l, k_m, k_n = jax.random.split(key, 4)
     wi, on = _off_axis(wi)
-    lob = _lobes(p, wi, h, k_t)
+    lob = _lobes(p, wi, h, k_t, medulla_present)
     lum = jnp.maximum(luminance_or_mean(lob.amplitude), 0.0) * on
     cdf = jnp.cumsum(lum, axis=0)
     tot = cdf[-1]

@@ -204,6 +204,25 @@ def fibres(p: Params):
     return barb, barbule
 
 
+def _fibre_stack(p: Params):
+    """The fibres of barb, proximal and distal barbule stacked along a leading axis of 3, and the medulla's
+    switch (3,) (None without a medulla). The barbules carry the barb's medulla switched off as data
+    (``Shape.present``), so the three fibres share static fields and one compiled trace (vmapped over
+    them) instead of a barb and a barbule variant: a third of the eval's compile time."""
+    barb, barbule = fibres(p)
+    present = None
+    if p.medulla:
+        barbule = replace_unchecked(barb, eta=p.eta_bb, sigma_a=p.sigma_a_bb, beta_m=p.beta_m_bb,
+                                    beta_n=p.beta_n_bb, eccentricity=p.e_bb)
+        present = jnp.asarray([True, False, False])
+
+    def stack(*leaves):
+        shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in leaves))
+        return jnp.stack([jnp.broadcast_to(jnp.asarray(v, jnp.result_type(float)), shape) for v in leaves])
+
+    return jax.tree_util.tree_map(stack, barb, barbule, barbule), present
+
+
 class Masking(NamedTuple):
     """The masking seen from a direction: the weights (3, ...) of barb, proximal and distal barbule,
     the transmitted fraction w_t (...), and each fibre's visible offset range h_lo, h_hi (3, ...)."""
@@ -252,43 +271,47 @@ def _estimate(p: Params, wi: Vec3, wo: Vec3, key, what):
                                                               angle_o))
     R = _frames(p)
     m = _masking(p, wi_u, R)
-    fib = fibres(p)
+    fib, present = _fibre_stack(p)
     n = p.n_h
     dtype = jnp.result_type(float)
-    k_h, k_b, k_bb = jax.random.split(_key(key), 3)
-    u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(k_h, (n,), dtype)) / n   # stratified, shared
+    keys = jax.random.split(_key(key), 3)            # offsets, barb, barbules (both barbules share theirs)
+    u = (jnp.arange(n, dtype=dtype) + jax.random.uniform(keys[0], (n,), dtype)) / n   # stratified, shared
+    keys = keys[jnp.asarray([1, 2, 2])]
+    # one vmap over (direction, fibre) and over (pair, fibre): the three fibres run one program, and a
+    # single level of batching keeps the tracing as cheap as one fibre's
+    M = wi_u.x.shape[0]
+    j_u = jnp.tile(jnp.arange(3), M)                                                # fibre of row k = 3 i + j
+    at = lambda t, j: jax.tree_util.tree_map(lambda v: v[j], t)  # noqa: E731
 
-    def trace(a: Vec3, lo, hi):
-        out = []
-        for j in range(3):
-            fp, key_j = (fib[0], k_b) if j == 0 else (fib[1], k_bb)
-            aj, ok = ff.off_axis(_to(R[j], a))
-            aj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in aj))
-            out.append((ff.trace_lobes(fp, aj, lo[j] + (hi[j] - lo[j]) * u, key_j), aj, ok))
-        return out
+    def trace(a: Vec3, j, lo, hi):
+        fp, on = at(fib, j), (None if present is None else present[j])
+        aj, ok = ff.off_axis(_to(R[j], a))
+        aj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in aj))
+        return ff.trace_lobes(fp, aj, lo + (hi - lo) * u, keys[j], on), aj, ok
 
-    traced = jax.vmap(trace, in_axes=(0, 1, 1))(wi_u, m.h_lo, m.h_hi)
+    rep = lambda v: jnp.repeat(v, 3, axis=0)  # noqa: E731
+    traced = jax.vmap(trace)(Vec3(*(rep(c) for c in wi_u)), j_u, m.h_lo.T.reshape(-1), m.h_hi.T.reshape(-1))
 
-    def one_pair(i, b: Vec3):
-        x = 0.0
-        for j in range(3):
-            fp = fib[0] if j == 0 else fib[1]
-            lob, aj, ok = jax.tree_util.tree_map(lambda v: v[i], traced[j])
-            # light along the fibre's axis: G = 0; a stand-in keeps the derivatives finite (the fibre
-            # angles' asin and atan2 are singular there, and a rotation of the frame moves it)
-            bj = _to(R[j], b)
-            ok_o = 1.0 - bj.x * bj.x > _TINY
-            bj = Vec3(jnp.where(ok_o, bj.x, 0.0), jnp.where(ok_o, bj.y, 1.0), jnp.where(ok_o, bj.z, 0.0))
-            bj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in bj))
-            if what == "eval":
-                g = jnp.sqrt(jnp.maximum(1.0 - bj.x * bj.x, 0.0))                   # G_j(wo) = cos theta_o
-                xj = ff.lobe_value(fp, lob, aj, bj) * g[:, None]
-            else:
-                xj = ff.lobe_density(fp, lob, bj)[:, None]
-            x = x + m.weight[j, i] * jnp.where(ok & ok_o, xj, 0.0)
-        return x
+    def one_pair(k, j, b: Vec3):
+        lob, aj, ok = at(traced, k)
+        # light along the fibre's axis: G = 0; a stand-in keeps the derivatives finite (the fibre
+        # angles' asin and atan2 are singular there, and a rotation of the frame moves it)
+        bj = _to(R[j], b)
+        ok_o = 1.0 - bj.x * bj.x > _TINY
+        bj = Vec3(jnp.where(ok_o, bj.x, 0.0), jnp.where(ok_o, bj.y, 1.0), jnp.where(ok_o, bj.z, 0.0))
+        bj = Vec3(*(jnp.broadcast_to(c, (n,)) for c in bj))
+        fp = at(fib, j)
+        if what == "eval":
+            g = jnp.sqrt(jnp.maximum(1.0 - bj.x * bj.x, 0.0))                   # G_j(wo) = cos theta_o
+            xj = ff.lobe_value(fp, lob, aj, bj) * g[:, None]
+        else:
+            xj = ff.lobe_density(fp, lob, bj)[:, None]
+        return jnp.where(ok & ok_o, xj, 0.0)
 
-    x = jax.vmap(one_pair)(idx, wo_f)                                              # (pairs, n, bands)
+    j_p = jnp.tile(jnp.arange(3), idx.shape[0])
+    x = jax.vmap(one_pair)(rep(idx) * 3 + j_p, j_p, Vec3(*(rep(c) for c in wo_f)))  # (3 pairs, n, bands)
+    x = x.reshape((-1, 3) + x.shape[1:]) * m.weight.T[idx][:, :, None, None]
+    x = x[:, 0] + x[:, 1] + x[:, 2]                                                # (pairs, n, bands)
     live = wi_u.z[idx] != 0
     if what == "eval":
         x = x * (_safe_inv(jnp.abs(wo_f.z)) * live)[:, None, None]
@@ -325,7 +348,7 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     wb = _to_barb(wi_s, angle)
     R = _frames(p)
     m = _masking(p, wb, R)
-    fb, fbb = fibres(p)
+    fib, present = _fibre_stack(p)
     k_e, k_h, k_b, k_bb = jax.random.split(key, 4)
     ue, uh = jax.random.uniform(k_e, (N,), dtype), jax.random.uniform(k_h, (N,), dtype)
     w = jnp.concatenate([m.weight, jnp.where(with_delta, m.w_t, 0.0)[None]])      # (events, N)
@@ -337,8 +360,13 @@ def _draw(p: Params, wi: Vec3, key, with_delta):
     h = m.h_lo + (m.h_hi - m.h_lo) * uh[None]
     pick = lambda a: jnp.take_along_axis(a, sel[None], axis=0)[0]  # noqa: E731
     R_bb = R[sel]                                                                     # (N, 3, 3)
-    wo_b, wt_b, pdf_b = ff.sample_at(fb, wb, h[0], k_b)
-    wo_l, wt_l, pdf_l = ff.sample_at(fbb, _to(R_bb, wb), pick(h), k_bb)
+    # the barb and the barbule as one program (vmapped over the two fibres; _fibre_stack)
+    first2 = lambda t: jax.tree_util.tree_map(lambda v: v[:2], t)  # noqa: E731
+    w_loc = Vec3(*(jnp.stack([c_b, c_l]) for c_b, c_l in zip(wb, _to(R_bb, wb))))
+    wo2, wt2, pdf2 = jax.vmap(ff.sample_at)(first2(fib), w_loc, jnp.stack([h[0], pick(h)]),
+                                            jnp.stack([k_b, k_bb]), first2(present))
+    wo_b, wt_b, pdf_b = Vec3(*(c[0] for c in wo2)), wt2[0], pdf2[0]
+    wo_l, wt_l, pdf_l = Vec3(*(c[1] for c in wo2)), wt2[1], pdf2[1]
     wo_bb = _from(R_bb, wo_l)
     is_barb = event == 0
     wo = Vec3(*(jnp.where(is_barb, c1, c2) for c1, c2 in zip(wo_b, wo_bb)))

@@ -145,6 +145,11 @@ class Shape:
     centre along the first axis (``b`` is unused; :func:`segment` sets it to ``a``). Its normal
     is the first axis turned by +90 degrees; it is open (``inside == outside``) and a ray meets
     it at most once between events.
+
+    ``present``: None (the shape is there), or a traced bool (or 0/1) that removes the shape as
+    data: where it is false no ray meets the shape. One compiled trace then serves sections with
+    and without it (a feather's barb with its medulla and its barbules without one); the shape's
+    geometry must still be finite where it is absent.
     """
 
     cy: jax.Array = 0.0
@@ -157,10 +162,11 @@ class Shape:
     outside: int = 0
     arc: Optional[tuple] = None
     geometry: str = "ellipse"
+    present: Optional[jax.Array] = None
 
     def tree_flatten(self):
         arc = self.arc if self.arc is not None else (0.0, 2.0 * math.pi)
-        return ((self.cy, self.cz, self.a, self.b, self.psi, self.interface, arc[0], arc[1]),
+        return ((self.cy, self.cz, self.a, self.b, self.psi, self.interface, arc[0], arc[1], self.present),
                 (self.inside, self.outside, self.arc is None, self.geometry))
 
     @classmethod
@@ -172,6 +178,7 @@ class Shape:
         object.__setattr__(obj, "outside", aux[1])
         object.__setattr__(obj, "arc", None if aux[2] else (ch[6], ch[7]))
         object.__setattr__(obj, "geometry", aux[3])
+        object.__setattr__(obj, "present", ch[8])
         return obj
 
     @property
@@ -255,6 +262,10 @@ class Section:
                 raise ValueError(f"{lab}: a segment is open: arc must be None and inside == outside "
                                  f"(got arc = {s.arc}, inside = {s.inside}, outside = {s.outside})")
             check_value(f"{lab}.a", s.a, ParamSpec(0.0, math.inf, lo_open=True))
+            if s.present is not None and not isinstance(s.present, jax.core.Tracer):
+                pv = np.asarray(s.present)
+                if pv.dtype != bool and not np.all((pv == 0) | (pv == 1)):
+                    raise ValueError(f"{lab}.present = {s.present!r}; valid: None, a bool or 0/1")
             check_value(f"{lab}.b", s.b, ParamSpec(0.0, math.inf, lo_open=True))
             itf = s.interface
             if itf.kind not in INTERFACE_KINDS:

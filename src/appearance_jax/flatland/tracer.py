@@ -215,6 +215,8 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
                 t, _ = G.intersect(P1(p_y), P1(p_z), P1(dd.y), P1(dd.z), cy, cz, a, b, psi, lo, span, leaving)
             if slots[i] is not None:  # semi-transparent: each crossing is there with probability coverage
                 t = jnp.where(coins[slots[i]:slots[i] + n_copies] < s.interface.coverage, t, jnp.inf)
+            if s.present is not None:  # a shape switched off as data
+                t = jnp.where(s.present, t, jnp.inf)
             ts.append(jnp.broadcast_to(t, kk.shape))
         T = jnp.concatenate(ts)                               # (S copies, N): shape-major
         j_best = jnp.argmin(T, axis=0)
