@@ -57,8 +57,8 @@ def intersect(py, pz, dy, dz, cy, cz, a, b, psi, lo, span, leaving):
 
     Args:
         py, pz: ray origin (2D). dy, dz: 2D components of the 3D unit direction.
-        cy, cz, a, b, psi: the ellipse. lo, span: the parametric range kept (span = 2 pi for a
-            closed ellipse).
+        cy, cz, a, b, psi: the ellipse. lo, span: the parametric range kept; ``span=None`` (static)
+            for a closed ellipse, which skips the arc test (two atan2 per call, always true there).
         leaving: boolean array, True where the ray starts on this shape (it has just been
             scattered there); the root at t = 0 is then excluded exactly.
 
@@ -92,8 +92,10 @@ def intersect(py, pz, dy, dz, cy, cz, a, b, psi, lo, span, leaving):
         return jnp.mod(g - lo, _TWO_PI) <= span
 
     inf = jnp.inf
-    ok_lo = real & (t_lo > 0) & on_arc(t_lo)
-    ok_hi = real & (t_hi > 0) & on_arc(t_hi)
+    ok_lo = real & (t_lo > 0)
+    ok_hi = real & (t_hi > 0)
+    if span is not None:
+        ok_lo, ok_hi = ok_lo & on_arc(t_lo), ok_hi & on_arc(t_hi)
     t = jnp.where(ok_lo, t_lo, jnp.where(ok_hi, t_hi, inf))
     return t, ok_lo | ok_hi
 

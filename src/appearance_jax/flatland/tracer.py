@@ -195,6 +195,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
 
     slots, _ = _coin_slots(section)
     is_seg = jnp.asarray([s.is_segment for s in shapes])
+    any_seg = any(s.is_segment for s in shapes)
 
     def core(f, ist, w, u, coins):
         """One event (differentiable in the float state ``f``)."""
@@ -206,7 +207,7 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         ts = []
         for i in range(S):
             s = shapes[i]
-            lo, span = s.arc_range()
+            lo, span = s.arc if s.arc is not None else (None, None)   # closed: no arc test
             cy, cz, a, b, psi = geometry_of(i, kk)
             leaving = P1(ist["last"] == i) & ((P1(ist["last_copy"]) == kk) if periodic else True)
             if s.is_segment:
@@ -237,15 +238,19 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         # geometry at the hit (of the selected shape and copy)
         geo = [geometry_of(i, kcopy) for i in range(S)]
         cy, cz, a, b, psi = (_select(sid, [g[q] for g in geo]) for q in range(5))
-        seg = is_seg[sid]
-        n_y, n_z = G.normal_at(ny_, nz_, cy, cz, jnp.where(seg, 1.0, a), jnp.where(seg, 1.0, b), psi)
-        s_y, s_z = G.segment_normal(psi)
-        n_y, n_z = jnp.where(seg, s_y, n_y), jnp.where(seg, s_z, n_z)
+        uy, uz = G.unit_2d(dd.y, dd.z)
+        if any_seg:
+            seg = is_seg[sid]
+            n_y, n_z = G.normal_at(ny_, nz_, cy, cz, jnp.where(seg, 1.0, a), jnp.where(seg, 1.0, b), psi)
+            s_y, s_z = G.segment_normal(psi)
+            n_y, n_z = jnp.where(seg, s_y, n_y), jnp.where(seg, s_z, n_z)
+            half = jnp.where(seg, G.segment_half_width(uy, uz, a, psi), G.half_width(uy, uz, a, b, psi))
+        else:  # (static) only ellipses: the segment branches are not compiled
+            n_y, n_z = G.normal_at(ny_, nz_, cy, cz, a, b, psi)
+            half = G.half_width(uy, uz, a, b, psi)
         n_out = Vec3(jnp.zeros_like(n_y), n_y, n_z)
         from_out = V.dot(dd, n_out) < 0
         # the hit's offset across the shape's projected width, to the left of the travel (h of launch)
-        uy, uz = G.unit_2d(dd.y, dd.z)
-        half = jnp.where(seg, G.segment_half_width(uy, uz, a, psi), G.half_width(uy, uz, a, b, psi))
         h_hit = ((ny_ - cy) * -uz + (nz_ - cz) * uy) / jnp.where(half > 0, half, 1.0)
 
         children = []
