@@ -89,6 +89,17 @@ def test_longitudinal_sampler_is_the_truncated_gaussian(Theta, beta):
     assert total == pytest.approx(1.0, abs=1e-8)
     assert np.max(np.abs(z)) < 4.5 and np.mean(z ** 2) < 1.0 + 5 * math.sqrt(2 / z.size)
 
+def test_truncation_cdfs_are_the_normal_cdf_at_both_ends():
+    """Phi((-+pi/2 - Theta) / beta) against scipy's normal CDF, for lobes inside, at and beyond the ends."""
+    from scipy.stats import norm
+    Theta = np.array([[-1.7, -0.3, 0.0], [0.4, 1.5, 2.0]])
+    beta = np.array([0.05, 0.3, 1.2])
+    a, b = D.truncation_cdfs(Theta, beta)
+    np.testing.assert_allclose(np.asarray(a), norm.cdf((-0.5 * math.pi - Theta) / beta), rtol=1e-12, atol=1e-300)
+    np.testing.assert_allclose(np.asarray(b), norm.cdf((0.5 * math.pi - Theta) / beta), rtol=1e-12, atol=1e-300)
+    assert np.asarray(a).shape == Theta.shape
+
+
 
 @pytest.mark.parametrize("call", [
     lambda: D.azimuthal(0.1, 0.0), lambda: D.gaussian(0.1, -0.2), lambda: D.longitudinal(0.1, 0.2, float("nan")),

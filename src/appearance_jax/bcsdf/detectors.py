@@ -107,6 +107,16 @@ def longitudinal(theta_o, Theta, beta, kind: str = "gaussian"):
     return g / cos_normaliser(Theta, beta) if kind == "gaussian_cos" else g
 
 
+def truncation_cdfs(Theta, beta):
+    """Phi((-pi/2 - Theta) / beta) and Phi((pi/2 - Theta) / beta): the normal CDF at both ends of
+    [-pi/2, pi/2] for a lobe at Theta of width beta. One ndtr on the two stacked arguments: each ndtr
+    call site compiles to its own large rational approximation."""
+    Theta, beta = jnp.broadcast_arrays(jnp.asarray(Theta), jnp.asarray(beta, jnp.result_type(Theta, float)))
+    ends = ndtr((jnp.stack([jnp.full_like(Theta, -0.5 * math.pi), jnp.full_like(Theta, 0.5 * math.pi)])
+                 - Theta) / beta)
+    return ends[0], ends[1]
+
+
 def sample_azimuthal(u, Phi, beta):
     """phi_o ~ G_N(phi_o - Phi | beta) from a uniform ``u`` in (0, 1): a normal offset wrapped to
     [-pi, pi) about Phi (exact). Returns ``(phi_o, density)``."""
@@ -120,8 +130,7 @@ def sample_longitudinal(u, Theta, beta):
     ``u`` in (0, 1). Returns ``(theta_o, density in dtheta_o)``; divide a factor evaluated at
     theta_o by it (and by cos(theta_o) for a solid-angle measure)."""
     _check_beta("sample_longitudinal", beta)
-    a = ndtr((-0.5 * math.pi - Theta) / beta)
-    b = ndtr((0.5 * math.pi - Theta) / beta)
+    a, b = truncation_cdfs(Theta, beta)
     p = a + jnp.clip(u, 0.0, 1.0) * (b - a)
     theta = jnp.clip(Theta + beta * ndtri(jnp.clip(p, 1e-300, 1.0 - 1e-16)), -0.5 * math.pi, 0.5 * math.pi)
     mass = b - a

@@ -77,7 +77,6 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.scipy.special import ndtr
 
 from ..core.frame import fiber_angles, fiber_direction
 from ..core.model import Model, boundary
@@ -230,8 +229,7 @@ def _lobe_pdf(p: Params, lob: Lobes, wo: Vec3):
     lum = jnp.maximum(luminance_or_mean(lob.amplitude), 0.0)                         # (E, N)
     tot = jnp.sum(lum, axis=0)
     prob = lum / jnp.where(tot > 0, tot, 1.0)
-    a = ndtr((-0.5 * math.pi - lob.theta) / p.beta_m)
-    b = ndtr((0.5 * math.pi - lob.theta) / p.beta_m)
+    a, b = detectors.truncation_cdfs(lob.theta, p.beta_m)
     p_theta = detectors.gaussian(tho[None] - lob.theta, p.beta_m) / jnp.maximum(b - a, _TINY)
     g_n = detectors.azimuthal(pho[None] - lob.phi, p.beta_n)
     return jnp.sum(prob * p_theta * g_n, axis=0) / jnp.maximum(jnp.cos(tho), _TINY)
