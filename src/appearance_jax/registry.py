@@ -2,7 +2,7 @@
 
 The registry is the layer above every model: it imports the model modules (a model never
 imports the registry) and lists their ``MODEL`` records. A new model module ends with a
-``MODEL = Model(...)`` record; add it to ``_MODELS`` below.
+``MODEL = Model(...)`` record; add its name and module to ``_ENTRIES`` below (imported on first use).
 
 Composite BSDFs (sums of lobes, :mod:`appearance_jax.bsdf.sum`) are named by joining
 registered BSDF names with ``+``: ``get("rough_conductor+lambert")``. Those in
@@ -14,38 +14,41 @@ Whitespace around the parts is ignored (``"rough_conductor + lambert"`` is the s
 
 from __future__ import annotations
 
-from .bcsdf import chiang, feather_fiber, huang, marschner, sadeghi, thread
-from .bsdf import (cloth, cosmetics, cosmetics_ordinates, feather, iridescent, lambert, rock_dove, rough_conductor,
-                   rough_dielectric, rough_plastic, snake)
+import importlib
+
 from .bsdf.sum import sum_model
 from .core.model import Model
-from .phase import henyey_greenstein, hg_mixture, mie, sggx_flakes, tabulated
 
-_MODELS: tuple[Model, ...] = (
-    lambert.MODEL,
-    rough_conductor.MODEL,
-    rough_dielectric.MODEL,
-    rough_plastic.MODEL,
-    iridescent.MODEL,
-    snake.MODEL,
-    rock_dove.MODEL,
-    feather.MODEL,
-    cosmetics.MODEL,
-    cosmetics_ordinates.MODEL,
-    cloth.MODEL,
-    cloth.weaves.MODEL,
-    henyey_greenstein.MODEL,
-    hg_mixture.MODEL,
-    sggx_flakes.MODEL,
-    mie.MODEL,
-    tabulated.MODEL,
-    chiang.MODEL,
-    marschner.MODEL,
-    sadeghi.MODEL,
-    huang.MODEL,
-    feather_fiber.MODEL,
-    thread.MODEL,
+# (name, module under appearance_jax) in listing order. A model module is imported the first time its
+# model is asked for, so a command that fits one model does not import (and build the module-level
+# tables of) the other 22: ~0.7 s of a CLI fit's start on a 2-core machine. The module's ``MODEL``
+# must carry the listed name (checked on import, and for every model by tests/core/test_registry.py).
+_ENTRIES: tuple[tuple[str, str], ...] = (
+    ("lambert", "bsdf.lambert"),
+    ("rough_conductor", "bsdf.rough_conductor"),
+    ("rough_dielectric", "bsdf.rough_dielectric"),
+    ("rough_plastic", "bsdf.rough_plastic"),
+    ("iridescent", "bsdf.iridescent"),
+    ("snake", "bsdf.snake"),
+    ("rock_dove", "bsdf.rock_dove"),
+    ("feather", "bsdf.feather"),
+    ("cosmetics", "bsdf.cosmetics"),
+    ("cosmetics_ordinates", "bsdf.cosmetics_ordinates"),
+    ("cloth", "bsdf.cloth"),
+    ("cloth_weave", "bsdf.cloth.weaves"),
+    ("henyey_greenstein", "phase.henyey_greenstein"),
+    ("hg_mixture", "phase.hg_mixture"),
+    ("sggx_flakes", "phase.sggx_flakes"),
+    ("mie", "phase.mie"),
+    ("tabulated_phase", "phase.tabulated"),
+    ("chiang_hair", "bcsdf.chiang"),
+    ("marschner_hair", "bcsdf.marschner"),
+    ("sadeghi_hair", "bcsdf.sadeghi"),
+    ("huang_hair", "bcsdf.huang"),
+    ("feather_fiber", "bcsdf.feather_fiber"),
+    ("cloth_thread", "bcsdf.thread"),
 )
+_WHERE = dict(_ENTRIES)
 
 # listed sums of lobes: Cook-Torrance specular + diffuse (the classical baseline for fitting
 # measured BRDFs), and a coated diffuse base with an extra diffuse lobe
@@ -54,8 +57,11 @@ _COMPOSITES = (
     "rough_plastic+lambert",
 )
 
-_REGISTRY: dict[str, Model] | None = None
-_BUILT: dict[str, Model] = {}  # composites built on demand by get()
+_NAMES: tuple[str, ...] = tuple(n for n, _ in _ENTRIES) + _COMPOSITES
+if len(set(_NAMES)) != len(_NAMES):
+    raise RuntimeError(f"duplicate model names in the registry: {sorted(n for n in _NAMES if _NAMES.count(n) > 1)}")
+_LOADED: dict[str, Model] = {}  # registered models, imported on first use
+_BUILT: dict[str, Model] = {}  # composites (listed or not) built on demand by get()
 
 
 def _composite_params(name: str, values: dict):
@@ -68,33 +74,28 @@ def _parse_sum(name: str) -> list[str]:
     return [part.strip() for part in name.split("+")]
 
 
-def _build_sum(parts: list[str], reg: dict[str, Model], whole: str) -> Model:
+def _model(name: str) -> Model:
+    """The registered (non-composite) model ``name``, importing its module on first use."""
+    m = _LOADED.get(name)
+    if m is None:
+        m = importlib.import_module(f"{__package__}.{_WHERE[name]}").MODEL
+        if m.name != name:
+            raise RuntimeError(f"registry: appearance_jax.{_WHERE[name]}.MODEL is named {m.name!r}, listed as {name!r}")
+        _LOADED[name] = m
+    return m
+
+
+def _build_sum(parts: list[str], whole: str) -> Model:
     for part in parts:
-        if part not in reg:  # a listed composite is no part either: parts hold no "+"
-            raise _unknown(part, reg, whole)
+        if part not in _WHERE:  # a listed composite is no part either: parts hold no "+"
+            raise _unknown(part, whole)
     key = "+".join(parts)
-    return sum_model(*(reg[part] for part in parts), name=key, rebuild=_composite_params)
+    return sum_model(*(_model(part) for part in parts), name=key, rebuild=_composite_params)
 
 
-def _load() -> dict[str, Model]:
-    global _REGISTRY
-    if _REGISTRY is None:
-        reg: dict[str, Model] = {}
-        for model in _MODELS:
-            if model.name in reg:
-                raise RuntimeError(f"duplicate model name {model.name!r} in registry._MODELS")
-            reg[model.name] = model
-        for name in _COMPOSITES:
-            if name in reg:
-                raise RuntimeError(f"duplicate model name {name!r} in registry._COMPOSITES")
-            reg[name] = _build_sum(_parse_sum(name), reg, name)
-        _REGISTRY = reg
-    return _REGISTRY
-
-
-def _unknown(name: str, reg, whole: str | None = None) -> KeyError:
+def _unknown(name: str, whole: str | None = None) -> KeyError:
     where = f" in {whole!r}" if whole is not None else ""
-    return KeyError(f"unknown model {name!r}{where}; registered models: {', '.join(sorted(reg))}")
+    return KeyError(f"unknown model {name!r}{where}; registered models: {', '.join(sorted(_NAMES))}")
 
 
 def get(name: str) -> Model:
@@ -102,27 +103,27 @@ def get(name: str) -> Model:
 
     ``"a+b"`` (registered BSDF names joined by ``+``) is the sum of their lobes
     (:func:`appearance_jax.bsdf.sum.sum_model`), built once and cached; a component that is
-    not a BSDF raises ``ValueError``.
+    not a BSDF raises ``ValueError``. A model's module is imported on first use.
     """
-    reg = _load()
-    if name in reg:
-        return reg[name]
+    if isinstance(name, str) and name in _WHERE:
+        return _model(name)
     if not isinstance(name, str) or "+" not in name:
-        raise _unknown(name, reg)
+        raise _unknown(name)
     parts = _parse_sum(name)
     key = "+".join(parts)
-    if key in reg:
-        return reg[key]
+    if key in _WHERE:  # "lambert " etc. never get here: a name without "+" was handled above
+        return _model(key)
     if key not in _BUILT:
-        _BUILT[key] = _build_sum(parts, reg, name)
+        _BUILT[key] = _build_sum(parts, name)
     return _BUILT[key]
 
 
 def names() -> list[str]:
-    """The listed model names (registered models and the listed composites), in registry order."""
-    return list(_load())
+    """The listed model names (registered models and the listed composites), in registry order.
+    Imports nothing."""
+    return list(_NAMES)
 
 
 def models() -> list[Model]:
-    """The listed models, in registry order."""
-    return list(_load().values())
+    """The listed models, in registry order (imports every model module)."""
+    return [get(n) for n in _NAMES]
