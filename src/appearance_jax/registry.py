@@ -111,8 +111,6 @@ def get(name: str) -> Model:
         raise _unknown(name)
     parts = _parse_sum(name)
     key = "+".join(parts)
-    if key in _WHERE:  # "lambert " etc. never get here: a name without "+" was handled above
-        return _model(key)
     if key not in _BUILT:
         _BUILT[key] = _build_sum(parts, name)
     return _BUILT[key]

@@ -178,8 +178,7 @@ def test_a_shape_switched_off_as_data_is_not_there():
     sig = jnp.asarray([0.2, 0.5, 1.0])
 
     def sec(sigma_a, medulla=True):
-        s = fl.fiber(1.55, sigma_a, medulla=(0.1, -0.1, 0.5, 0.5) if medulla else None, medulla_albedo=0.7)
-        return s
+        return fl.fiber(1.55, sigma_a, medulla=(0.1, -0.1, 0.5, 0.5) if medulla else None, medulla_albedo=0.7)
 
     def total(sigma_a, present):
         s = sec(sigma_a)

@@ -165,7 +165,7 @@ class Shape:
     present: Optional[jax.Array] = None
 
     def tree_flatten(self):
-        arc = self.arc if self.arc is not None else (0.0, 2.0 * math.pi)
+        arc = self.arc_range()
         return ((self.cy, self.cz, self.a, self.b, self.psi, self.interface, arc[0], arc[1], self.present),
                 (self.inside, self.outside, self.arc is None, self.geometry))
 

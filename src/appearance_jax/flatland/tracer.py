@@ -194,8 +194,8 @@ def _trace(section, wi, h, key, E0, max_events, mode, wave, polarized, nee=False
         return cy, s.cz, s.a, s.b, s.psi
 
     slots, _ = _coin_slots(section)
-    is_seg = jnp.asarray([s.is_segment for s in shapes])
     any_seg = any(s.is_segment for s in shapes)
+    is_seg = jnp.asarray([s.is_segment for s in shapes]) if any_seg else None
 
     def core(f, ist, w, u, coins):
         """One event (differentiable in the float state ``f``)."""
