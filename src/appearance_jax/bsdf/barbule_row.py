@@ -149,14 +149,17 @@ def breakpoints(dx, dz, b, phi0, phi1, H, mu, neighbours: int):
     cx, cz = offsets(H, mu, neighbours)
     e = lambda v: jnp.asarray(v)[..., None]  # noqa: E731
     dxe, dze, be = e(dx), e(dz), e(b)
-    feats = []
-    for ang in (e(phi0), e(phi1), e(phi_d) - 0.5 * math.pi, e(phi_d) + 0.5 * math.pi):
-        fx, fz = arc_point(ang, be)
-        h = -dze * (cx + fx) + dxe * (cz + fz)  # offset along w = (-dz, dx)
-        feats.append(front_point(h, dxe, dze, be))
-    feats += list(_crossings(cx, cz, be))
+    # the shadow edges cast by the 4 feature points of each neighbour (its arc ends and its
+    # silhouette points), (..., 4, 2n): one computation, not four copies of it
+    ang = jnp.stack(jnp.broadcast_arrays(phi0, phi1, phi_d - 0.5 * math.pi, phi_d + 0.5 * math.pi), axis=-1)
+    fx, fz = arc_point(e(ang), e(be))
+    h = -e(dze) * (cx[..., None, :] + fx) + e(dxe) * (cz[..., None, :] + fz)  # offset along w = (-dz, dx)
+    edges = front_point(h, e(dxe), e(dze), e(be))
+    feats = [edges.reshape(edges.shape[:-2] + (-1,))] + list(_crossings(cx, cz, be))
     m = e(mid)
-    cand = jnp.concatenate(jnp.broadcast_arrays(*[wrap_near(f, m) for f in feats]), axis=-1)
+    feats = [wrap_near(f, m) for f in feats]
+    lead = jnp.broadcast_shapes(*(f.shape[:-1] for f in feats))
+    cand = jnp.concatenate([jnp.broadcast_to(f, lead + f.shape[-1:]) for f in feats], axis=-1)
     cand = jnp.clip(cand, e(lo), e(hi))
     return jnp.sort(jnp.concatenate(jnp.broadcast_arrays(e(lo), cand, e(hi)), axis=-1), axis=-1)
 

@@ -261,6 +261,7 @@ def airy_transmittance(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2, pola
     return airy(cos0, wavelength_nm, thickness_nm, eta0, eta1, eta2).transmittance(polarization)
 
 
+@jax.custom_jvp
 def airy_trt(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflectance):
     """Huang Eq. 5.3 (= F.3): film, melanin bounce, film again, for a free-standing film.
 
@@ -280,6 +281,25 @@ def airy_trt(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflec
     a = airy(cos_i, wavelength_nm, thickness_nm, one, eta_film, one)
     b = airy(cos_o, wavelength_nm, thickness_nm, one, eta_film, one)
     return jnp.asarray(melanin_reflectance) * 0.5 * (a.T_s * b.T_s + a.T_p * b.T_p)
+
+
+def _airy_trt_stacked(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflectance):
+    """:func:`airy_trt` with both crossings as one film evaluation on a leading axis of 2."""
+    one = jnp.ones((), jnp.result_type(cos_i, float))
+    shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in (cos_i, cos_o, wavelength_nm, thickness_nm, eta_film)))
+    cos = jnp.stack([jnp.broadcast_to(cos_i, shape), jnp.broadcast_to(cos_o, shape)])
+    f = airy(cos, wavelength_nm, thickness_nm, one, eta_film, one)
+    return jnp.asarray(melanin_reflectance) * 0.5 * (f.T_s[0] * f.T_s[1] + f.T_p[0] * f.T_p[1])
+
+
+@airy_trt.defjvp
+def _airy_trt_jvp(primals, tangents):
+    # Derivatives come from the stacked form: XLA:CPU copies much of a film's reverse pass into
+    # every fusion that reads it, so two films' reverse passes compiled to twice the code of one
+    # stacked film (rock_dove's value-and-gradient: 120k -> 58k lines of optimised HLO, compile
+    # 28 -> 13 s). Values stay with the two separate films, which run ~1.8x faster: fused into
+    # their product, while the stacked film writes its (2, ...) outputs to memory first.
+    return jax.jvp(_airy_trt_stacked, primals, tangents)
 
 
 def film_period_nm(cos0, wavelength_nm, eta0, eta1):
