@@ -95,6 +95,7 @@ import jax.numpy as jnp
 
 from ..bcsdf import feather_fiber as ff
 from ..bcsdf import detectors
+from ..core.arrays import stacked
 from ..core.model import Model, boundary
 from ..core.params import Bands, integer, param, params_class, Real, replace_unchecked, static, validate
 from ..core.frame import rotate_z
@@ -217,8 +218,7 @@ def _fibre_stack(p: Params):
         present = jnp.asarray([True, False, False])
 
     def stack(*leaves):
-        shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in leaves))
-        return jnp.stack([jnp.broadcast_to(jnp.asarray(v, jnp.result_type(float)), shape) for v in leaves])
+        return stacked(*(jnp.asarray(v, jnp.result_type(float)) for v in leaves))
 
     return jax.tree_util.tree_map(stack, barb, barbule, barbule), present
 

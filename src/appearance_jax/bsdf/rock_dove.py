@@ -85,6 +85,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..core import spectral
+from ..core.arrays import stacked
 from ..core.model import Model, boundary, with_bands
 from ..core.params import Real, integer, param, params_class, static
 from ..core.quadrature import gauss_legendre, smoothstep_rule
@@ -231,14 +232,6 @@ def valid_fraction(p: Params, w: Vec3):
 # --------------------------------------------------------------------------------------
 
 
-def _both(p: Params, *pairs, like=()):
-    """Each (from w_i, from w_o) pair of arrays stacked on a new leading axis of 2, broadcast against
-    each other, p's leaves and ``like``: the geometry of both directions runs as one computation
-    (one compiled copy instead of two; the reverse pass duplicated each copy several times)."""
-    shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in jax.tree_util.tree_leaves((pairs, like, p))))
-    return tuple(jnp.stack([jnp.broadcast_to(a, shape), jnp.broadcast_to(b, shape)]) for a, b in pairs)
-
-
 def _s_r_geometry(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
     """S_R / I_R = D G / (4 <w_i, n> <w_o, n>) and the facet cosine; wi, wo above the barb plane
     (local), bi, bo in the barbule frame."""
@@ -247,8 +240,8 @@ def _s_r_geometry(p: Params, wi: Vec3, wo: Vec3, bi: Vec3, bo: Vec3):
     phi_m = atan2(h.x, h.z)
     dxi, dzi, _, _ = _transverse(bi)
     dxo, dzo, _, _ = _transverse(bo)
-    dx, dz = _both(p, (dxi, dxo), (dzi, dzo), like=(phi_m,))
-    g = _sees(p, phi_m, dx, dz)
+    # both directions as one computation (core.arrays.stacked)
+    g = _sees(p, phi_m, stacked(dxi, dxo, like=(p, phi_m)), stacked(dzi, dzo, like=(p, phi_m)))
     g = g[0] & g[1]
     cos_b = jnp.clip(V.dot(bi, h), 0.0, 1.0)
     d = jnp.where(g, ndf(p, theta_m, phi_m), 0.0)
@@ -279,7 +272,7 @@ N_RUNS = 2
 
 def _both_lit(p: Params, dxi, dzi, dxo, dzo):
     """(lo, hi) (..., N_RUNS^2): the intervals of normal azimuths lit from both 2D directions."""
-    dx, dz = _both(p, (dxi, dxo), (dzi, dzo))
+    dx, dz = stacked(dxi, dxo, like=p), stacked(dzi, dzo, like=p)  # both directions as one computation
     (si, so), (ei, eo) = row.lit_runs(*row.lit_pieces(dx, dz, p.b, p.phi0, p.phi1, p.H, p.mu, p.neighbours)[:2], N_RUNS)
     lo = jnp.maximum(si[..., :, None], so[..., None, :])
     hi = jnp.minimum(ei[..., :, None], eo[..., None, :])

@@ -52,6 +52,7 @@ import jax
 import jax.numpy as jnp
 
 from ..core import spectral
+from ..core.arrays import stacked
 from .fresnel import interface_amplitudes, normal_index
 
 POLARIZATIONS = ("unpolarized", "s", "p")
@@ -286,9 +287,8 @@ def airy_trt(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflec
 def _airy_trt_stacked(cos_i, cos_o, wavelength_nm, thickness_nm, eta_film, melanin_reflectance):
     """:func:`airy_trt` with both crossings as one film evaluation on a leading axis of 2."""
     one = jnp.ones((), jnp.result_type(cos_i, float))
-    shape = jnp.broadcast_shapes(*(jnp.shape(v) for v in (cos_i, cos_o, wavelength_nm, thickness_nm, eta_film)))
-    cos = jnp.stack([jnp.broadcast_to(cos_i, shape), jnp.broadcast_to(cos_o, shape)])
-    f = airy(cos, wavelength_nm, thickness_nm, one, eta_film, one)
+    f = airy(stacked(cos_i, cos_o, like=(wavelength_nm, thickness_nm, eta_film)), wavelength_nm, thickness_nm, one,
+             eta_film, one)
     return jnp.asarray(melanin_reflectance) * 0.5 * (f.T_s[0] * f.T_s[1] + f.T_p[0] * f.T_p[1])
 
 
