@@ -8,7 +8,7 @@ import re
 import pytest
 
 from appearance_jax import registry
-from appearance_jax.cli import EXIT_CODES, build_parser, main
+from appearance_jax.cli import EXIT_CODES, EXIT_USAGE, build_parser, main
 from appearance_jax.cli import known
 from appearance_jax.cli.parser import COMMANDS, version
 
@@ -101,3 +101,33 @@ def test_known_parameter_records_are_valid():
             assert why and len(why) < 90
             n += 1
     assert n >= 3
+
+
+def _console(argv, tmp_path):
+    """Run the console entry point in a fresh interpreter (it ends the process), output piped."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import atexit, sys\n"
+            "atexit.register(lambda: print('atexit ran'))\n"
+            f"sys.argv = ['appearance-jax'] + {list(argv)!r}\n"
+            "from appearance_jax.cli import console\n"
+            "console()\n"
+            "print('not reached')\n")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # piped stdout block-buffered
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, cwd=tmp_path,
+                          env=env)
+
+
+def test_console_exits_with_the_commands_code_after_flushing_and_atexit(tmp_path):
+    # console() leaves by os._exit (no interpreter teardown): piped output must be complete,
+    # atexit handlers must have run, and the exit status must be the command's
+    ok = _console(["models"], tmp_path)
+    assert ok.returncode == 0, ok.stderr
+    names = registry.names()
+    assert all(n in ok.stdout for n in names)
+    assert ok.stdout.rstrip().endswith("atexit ran") and "not reached" not in ok.stdout
+    bad = _console(["eval", "--model", "no_such_model"], tmp_path)
+    assert bad.returncode == EXIT_USAGE, (bad.returncode, bad.stderr)
+    assert "no_such_model" in bad.stderr and "atexit ran" in bad.stdout

@@ -10,12 +10,14 @@ option checks in :mod:`.checks`, the physically known parameters held fixed by `
 
 from __future__ import annotations
 
+import atexit
+import os
 import sys
 
 from .checks import EXIT_CODES, EXIT_FAILURE, EXIT_NOT_CONVERGED, EXIT_OK, EXIT_USAGE
 from .parser import build_parser
 
-__all__ = ["main", "build_parser", "EXIT_CODES", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_NOT_CONVERGED"]
+__all__ = ["main", "console", "build_parser", "EXIT_CODES", "EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_NOT_CONVERGED"]
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -42,6 +44,25 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as e:  # a file that could not be read or written (permissions, disk full)
         print(f"appearance-jax {args.cmd}: error: {e}", file=sys.stderr)
         return EXIT_FAILURE
+
+
+def console() -> None:
+    """The ``appearance-jax`` console script: :func:`main`, then the process exits with its code.
+
+    The exit skips the interpreter's teardown (freeing every module, XLA client and compiled
+    program object one by one): ~0.5 s of a 5 s warm ``fit`` on 2 cores. Everything the command
+    wrote is closed by then; output buffers are flushed and the ``atexit`` handlers (JAX's,
+    logging's, matplotlib's) run as on a normal exit. An exception, ``-h`` or an argparse error
+    leaves the usual way.
+    """
+    code = main()
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):  # a closed pipe: nothing more can be written anyway
+            pass
+    os._exit(int(code))
 
 
 def _compile_cache(args) -> None:

@@ -1,7 +1,5 @@
 """``python -m appearance_jax.cli``: the same as the ``appearance-jax`` command."""
 
-import sys
+from . import console
 
-from . import main
-
-sys.exit(main())
+console()
