@@ -55,12 +55,6 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     dt = z0.dtype
     jac = jax.jacfwd(fn)
 
-    def lin(z):
-        # r from a plain evaluation, not as the JVP's primal output (jacfwd(has_aux)): a Monte Carlo
-        # model's estimator may differ under differentiation (the cosmetics walk's CRN fit then stopped
-        # converging), and r must match the loss of the trial evaluation
-        return fn(z, data), jac(z, data)
-
     r0 = fn(z0, data)
     loss0 = 0.5 * jnp.sum(r0 * r0)
     lam0 = jnp.asarray(LAMBDA0, dt)
@@ -72,8 +66,13 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     def body(s):
         z, loss, lam, nu = s["z"], s["loss"], s["lam"], s["nu"]
         # the Jacobian at the current point, computed only after a move: one trace of the model's
-        # forward-mode derivative in the program (compile time), none after the last step
-        r, J = jax.lax.cond(s["fresh"], lambda: lin(z), lambda: (s["r"], s["J"]))
+        # forward-mode derivative in the program (compile time), none after the last step. r is the
+        # plain evaluation that accepted z (the trial's r_new), not the JVP's primal output
+        # (jacfwd(has_aux)): a Monte Carlo model's estimator may differ under differentiation (the
+        # cosmetics walk's CRN fit then stopped converging), and r must match the loss; carrying it
+        # keeps the model's forward pass in the program twice (start, trial) instead of three times
+        r = s["r"]
+        J = jax.lax.cond(s["fresh"], lambda: jac(z, data), lambda: s["J"])
         g = J.T @ r
         H = J.T @ J
         # isotropic damping lam * mean(diag H) * I: a parameter pinned at a bound (its Jacobian column
@@ -116,7 +115,7 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         stuck = lam2 > LAMBDA_MAX
         if progress is not None:
             jax.debug.callback(progress, s["step"] + 1, jnp.where(ok, loss_new, loss))
-        return dict(z=z2, r=r, J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
+        return dict(z=z2, r=jnp.where(ok, r_new, r), J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
                     step=s["step"] + 1, done=converged | stuck, converged=converged)
 
     s0 = dict(z=z0, r=r0, J=jnp.zeros((r0.shape[0], z0.shape[0]), dt), fresh=jnp.asarray(True), loss=loss0,
