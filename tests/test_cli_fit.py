@@ -210,10 +210,10 @@ def test_fit_that_diverges_exits_3_with_a_named_error(lambert_csv, tmp_path, cap
 
     from appearance_jax.fit.solve import FitDiverged, solvers
 
-    def diverging(problem, z0, data, **kw):
-        return jnp.full_like(z0, jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(7), jnp.asarray(False)
+    def diverging(problem, z0, data, **kw):  # solvers._solve: ((z, loss, steps, ok), (r, J) or None)
+        return (jnp.full_like(z0, jnp.nan), jnp.asarray(jnp.nan), jnp.asarray(7), jnp.asarray(False)), None
 
-    monkeypatch.setattr(solvers, "solve_z", diverging)
+    monkeypatch.setattr(solvers, "_solve", diverging)
     code = main(["fit", lambert_csv, "--model", "lambert", "--no-plots", "--out", str(tmp_path / "fit")])
     assert code == EXIT_NOT_CONVERGED
     cap = capsys.readouterr()

@@ -108,3 +108,25 @@ def test_loss_tol_is_safe_in_a_curved_valley():
         z, loss, steps, ok = levenberg_marquardt(rosenbrock, jnp.array([-1.2, 1.0]), (1.0, 1000.0), loss_tol=0.025,
                                                  max_steps=400)
         assert bool(ok) and float(loss) <= 0.025 + 1e-12
+
+
+@pytest.mark.parametrize("max_steps", [0, 1, 3, 400])
+def test_with_jacobian_returns_r_and_j_at_the_returned_point(max_steps):
+    """with_jacobian: the same solve (z, loss, steps, converged bitwise), and r, J at the returned
+    z exactly (jacfwd there), also when the loop stops on an accepted step (converged, or at the
+    step limit), and under vmap (starts ending at different steps)."""
+    data = (1.0, 10.0)
+    z0s = jnp.array([[-1.2, 1.0], [0.9, 0.8], [1.0, 1.0]])
+    plain = jax.jit(jax.vmap(lambda z: levenberg_marquardt(rosenbrock, z, data, max_steps=max_steps)))(z0s)
+    full = jax.jit(jax.vmap(lambda z: levenberg_marquardt(rosenbrock, z, data, max_steps=max_steps,
+                                                          with_jacobian=True)))(z0s)
+    for a, b in zip(plain, full[:4]):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    z = np.asarray(full[0])
+    for k in range(z0s.shape[0]):
+        np.testing.assert_allclose(np.asarray(full[4][k]), np.asarray(rosenbrock(jnp.asarray(z[k]), data)),
+                                   rtol=1e-12, atol=1e-18)  # r ~ 1e-14 at the optimum: rounding in z1 - z0^2
+        np.testing.assert_allclose(np.asarray(full[5][k]), np.asarray(jax.jacfwd(rosenbrock)(jnp.asarray(z[k]), data)),
+                                   rtol=1e-14, atol=1e-14)
+    if max_steps == 400:
+        assert np.all(np.asarray(full[3]))

@@ -178,3 +178,47 @@ def test_parameters_at_bounds_get_no_sigma_and_a_warning(tmp_path):
     assert back["uncertainty"]["method"] == "hc1" and back["warnings"] == res.warnings
     assert back["correlation"]["labels"] == list(res.labels) and len(back["correlation"]["matrix"]) == 3
     assert back["correlation"]["matrix"][0][0] == pytest.approx(1.0) and d["degeneracies"] == []
+
+
+def _direct_covariances(model, table, x, **build):
+    """unc.covariances at x with the model's own Jacobian in x (the reference for the solver's)."""
+    import jax
+
+    from appearance_jax.fit.solve.problem import build_problem
+    from appearance_jax.fit.solve.uncertainty import covariances
+
+    problem = build_problem(model, table, **build)
+    cl, n_cl, _ = incidence_clusters(problem.data["wi"])
+    out = jax.jit(lambda x, d, c: covariances(problem, x, d, c, n_cl))(np.asarray(x), problem.data, np.asarray(cl))
+    return {k: np.asarray(v, np.float64) for k, v in out.items()}
+
+
+@pytest.mark.parametrize("case", ["interior", "bounds"])
+def test_covariances_from_the_solvers_jacobian_are_the_models(case):
+    """fit() and fit_batch() take the covariances from LM's final Jacobian in z, divided by dx/dz
+    (uncertainty.at_solution); they must equal the covariances from the model's Jacobian in x to
+    rounding: in the interior (2 starts, the best one's), and with parameters on a bound (their
+    columns dropped, the others' intact)."""
+    if case == "interior":
+        table = _table()
+        model = registry.get("rough_conductor")
+        f = _model_values(model, model.Params(alpha=0.2, specular_reflectance=(0.9, 0.8, 0.7)), table)
+        table = table.replace(values=_realisations(table, f, 1, seed=3)[0])
+        build, kw = dict(fix=FIX), dict(n_starts=2, seed=1)
+    else:
+        ti, pi_, to, po = gonio_angles([0, 20, 40, 60, 75], np.arange(0, 81, 10), np.arange(0, 181, 30))
+        v = np.broadcast_to(np.array([0.5, 0.0, 0.0]) / np.pi, (ti.size, 3))
+        v = np.abs(v * (1 + 0.01 * np.random.default_rng(1).standard_normal((ti.size, 3))))
+        table = Table(ti, pi_, to, po, v, np.ones((ti.size, 3), bool), source="two dark bands")
+        model, build, kw = registry.get("lambert"), {}, {}
+    res = fit(model, table, **build, **kw)
+    if case == "bounds":
+        assert set(res.at_bound) == {"reflectance[G]", "reflectance[B]"}
+    ref = _direct_covariances(model, table, res.x, **build)
+    for got, want in ((res.cov_iid, ref["iid"]), (res.sigma_hc1, np.sqrt(np.diag(ref["hc1"]))),
+                      (res.sigma_cr1, np.sqrt(np.diag(ref["cr1"]))), (res.sigma_sandwich, np.sqrt(np.diag(ref["cr3"]))),
+                      (res.eigenvalues, ref["lam"])):
+        np.testing.assert_allclose(got, want, rtol=1e-7, atol=1e-12 * np.max(np.abs(want)))
+    batch = fit_batch(model, table, table.values[None], **build)
+    np.testing.assert_allclose(batch.sigma_hc1[0], np.sqrt(np.diag(_direct_covariances(
+        model, table, batch.x[0], **build)["hc1"])), rtol=1e-7, atol=1e-14)

@@ -33,7 +33,7 @@ from .problem import build_problem, entry_arrays
 from . import reuse
 from . import uncertainty as unc
 from .result import FitResult, finish, flags, sigma_kinds
-from .solvers import SOLVERS, bootstrap_refits, solve_z
+from .solvers import SOLVERS, _solve, bootstrap_refits, solve_with_covariances
 
 
 @dataclass
@@ -162,9 +162,9 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
 
     def run(z0s, data):
         def one(z, d):
-            z, loss, steps, ok = solve_z(problem, z, d, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps)
-            x = sp.x_from_z(z)
-            return z, x, unc.covariances(problem, x, d, cl, n_cl), loss, steps, ok
+            (z, loss, steps, ok), cov = solve_with_covariances(problem, z, d, cl, n_cl, solver=solver, rtol=rtol,
+                                                               atol=atol, max_steps=max_steps)
+            return z, sp.x_from_z(z), cov, loss, steps, ok
 
         return jax.vmap(one, in_axes=(0,) + in_axes)(z0s, data)
 
@@ -178,7 +178,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     # kept for later batches of the same problem, shapes and devices (:mod:`~.reuse`); ``run`` also
     # captures the incidence clusters (from the directions) and the solver settings
     pkey = reuse.problem_key(problem)
-    bkey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, int(n_cl),
+    bkey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, int(n_cl),
                                       np.asarray(cl).tobytes(), tuple(d.id for d in devs))
     t0 = time.perf_counter()
     compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)

@@ -44,13 +44,17 @@ LAMBDA_MAX = 1e16
 
 
 def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10, max_steps: int = 400,
-                        loss_tol: float | None = None, progress=None):
+                        loss_tol: float | None = None, progress=None, with_jacobian: bool = False):
     """Minimise 1/2 |fn(z, data)|^2 from ``z0`` (p,). Returns ``(z, loss, steps, converged)``
     (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``loss_tol``:
     also converged when the Gauss-Newton decrement 1/2 gᵀ(JᵀJ)⁻¹g at the current point (the
     loss the undamped step would remove) is at most this (None: off). ``progress``: a
     host function ``(step, loss)`` called after every iteration (a host callback: such a
-    program is not kept in JAX's persistent compilation cache)."""
+    program is not kept in JAX's persistent compilation cache). ``with_jacobian``: also return
+    r and J = dr/dz at the returned z, ``(z, loss, steps, converged, r, J)``: when the last step
+    was accepted the loop runs one more pass that only takes the Jacobian there (the same traced
+    Jacobian, so the program holds one copy of it; the uncertainties at the optimum need no
+    program of their own)."""
     z0 = jnp.asarray(z0)
     dt = z0.dtype
     jac = jax.jacfwd(fn)
@@ -61,10 +65,13 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     eye = jnp.eye(z0.shape[0], dtype=dt)
 
     def cond(s):
-        return (~s["done"]) & (s["step"] < max_steps)
+        more = (~s["done"]) & (s["step"] < max_steps)
+        return (more | s["fresh"]) if with_jacobian else more
 
     def body(s):
         z, loss, lam, nu = s["z"], s["loss"], s["lam"], s["nu"]
+        # with_jacobian: a pass after the last step only refreshes J (the state is kept below)
+        final = s["done"] | (s["step"] >= max_steps)
         # the Jacobian at the current point, computed only after a move: one trace of the model's
         # forward-mode derivative in the program (compile time), none after the last step. r is the
         # plain evaluation that accepted z (the trial's r_new), not the JVP's primal output
@@ -114,14 +121,21 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         nu2 = jnp.where(ok, 2.0, 2.0 * nu)
         stuck = lam2 > LAMBDA_MAX
         if progress is not None:
-            jax.debug.callback(progress, s["step"] + 1, jnp.where(ok, loss_new, loss))
-        return dict(z=z2, r=jnp.where(ok, r_new, r), J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2, nu=nu2,
-                    step=s["step"] + 1, done=converged | stuck, converged=converged)
+            # step 0 for the final pass: _progress_host prints nothing for it
+            jax.debug.callback(progress, jnp.where(final, 0, s["step"] + 1), jnp.where(ok, loss_new, loss))
+        new = dict(z=z2, r=jnp.where(ok, r_new, r), J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2,
+                   nu=nu2, step=s["step"] + 1, done=converged | stuck, converged=converged)
+        if not with_jacobian:
+            return new
+        kept = dict(s, J=J, fresh=jnp.asarray(False))
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(final, a, b), kept, new)
 
     s0 = dict(z=z0, r=r0, J=jnp.zeros((r0.shape[0], z0.shape[0]), dt), fresh=jnp.asarray(True), loss=loss0,
               lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0), done=~jnp.isfinite(loss0),
               converged=jnp.asarray(False))
     s = jax.lax.while_loop(cond, body, s0)
+    if with_jacobian:
+        return s["z"], s["loss"], s["step"], s["converged"], s["r"], s["J"]
     return s["z"], s["loss"], s["step"], s["converged"]
 
 

@@ -285,6 +285,8 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
                           "another metric, or fix the parameters that run away")
     cl, n_cl, what = unc.incidence_clusters(data["wi"])
     out = covariances
+    if out is not None and not all(np.isfinite(np.asarray(out[k])).all() for k in ("iid", "hc1", "cr1", "cr3")):
+        out = None  # e.g. a column the solver's Jacobian cannot give (uncertainty.at_solution): directly
     if out is None:
         cl = np.asarray(cl)
         cov_fn = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),

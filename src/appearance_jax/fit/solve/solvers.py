@@ -103,13 +103,32 @@ def _make_solver(name, rtol, atol, verbose, n_valid=1):
 def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0,
             loss_tol=None):
     """One solve from z0 (traceable: vmap it over starts or data). Returns (z, loss, steps, ok)."""
+    return _solve(problem, z0, data, solver=solver, rtol=rtol, atol=atol, max_steps=max_steps, verbose=verbose,
+                  loss_tol=loss_tol)[0]
+
+
+def solve_with_covariances(problem: Problem, z0, data, cluster, n_clusters: int, **solve_kw):
+    """:func:`solve_z`, then the covariances at its z (:func:`~.uncertainty.covariances`; traceable).
+    Returns ((z, loss, steps, ok), covariances). With ``solver="lm"`` from the solver's own final
+    residuals and Jacobian (:func:`~.uncertainty.at_solution`): the program traces the model's
+    Jacobian once."""
+    (z, loss, steps, ok), rJ = _solve(problem, z0, data, jacobian=True, **solve_kw)
+    if rJ is not None:
+        return (z, loss, steps, ok), unc.at_solution(problem, z, data, cluster, n_clusters, *rJ)
+    return (z, loss, steps, ok), unc.covariances(problem, problem.space.x_from_z(z), data, cluster, n_clusters)
+
+
+def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0,
+           loss_tol=None, jacobian=False):
+    """((z, loss, steps, ok), (r, J) at z or None): (r, J) only from ``solver="lm"`` with ``jacobian``."""
     fn = problem.residuals_z
     if solver == "lm":
         n_valid = int(np.sum(np.asarray(problem.data["weight"]) > 0))
-        z, loss, steps, ok = levenberg_marquardt(fn, z0, data, rtol=rtol, atol=atol, max_steps=max_steps,
-                                                 loss_tol=loss_tol,
-                                                 progress=_progress_host(verbose, n_valid) if verbose else None)
-        return z, loss, steps, ok & jnp.all(jnp.isfinite(z))
+        out = levenberg_marquardt(fn, z0, data, rtol=rtol, atol=atol, max_steps=max_steps, loss_tol=loss_tol,
+                                  progress=_progress_host(verbose, n_valid) if verbose else None,
+                                  with_jacobian=jacobian)
+        z, loss, steps, ok = out[:4]
+        return (z, loss, steps, ok & jnp.all(jnp.isfinite(z))), (out[4:] if jacobian else None)
     if solver == "jaxopt_lm":
         import jaxopt
 
@@ -118,7 +137,7 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
                                        materialize_jac=True, jit=True)
         z, state = lm.run(z0, data)
         r = fn(z, data)
-        return z, 0.5 * jnp.sum(r * r), state.iter_num, jnp.all(jnp.isfinite(z))
+        return (z, 0.5 * jnp.sum(r * r), state.iter_num, jnp.all(jnp.isfinite(z))), None
     import optimistix as optx
 
     opt = _make_solver(solver, rtol, atol, verbose, int(np.sum(np.asarray(problem.data["weight"]) > 0)))
@@ -130,7 +149,7 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
     z = sol.value
     r = fn(z, data)
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(z))
-    return z, 0.5 * jnp.sum(r * r), sol.stats["num_steps"], ok
+    return (z, 0.5 * jnp.sum(r * r), sol.stats["num_steps"], ok), None
 
 
 def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights=None,
@@ -197,23 +216,29 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - 1).astype(dt)])
     n_starts = z0.shape[0]
 
-    def run(z0s, data):
+    cl, n_cl, _ = unc.incidence_clusters(problem.data["wi"])
+    cl = jnp.asarray(cl)
+
+    def run(z0s, data, cl):
         # starts one after another (lax.map), not vmapped: a vmapped while loop compiles to a
         # program 2-3x slower to compile (every branch becomes a select over the batch), and
-        # on a CPU batching the starts saves little
-        return jax.lax.map(lambda z: solve_z(problem, z, data, solver=solver, rtol=rtol, atol=atol,
-                                             max_steps=max_steps, verbose=verbose, loss_tol=loss_tol), z0s)
+        # on a CPU batching the starts saves little. Each start's covariances come with it: from
+        # LM's own final Jacobian, so no program of their own traces and compiles the model again
+        return jax.lax.map(lambda z: solve_with_covariances(problem, z, data, cl, n_cl, solver=solver, rtol=rtol,
+                                                            atol=atol, max_steps=max_steps, verbose=verbose,
+                                                            loss_tol=loss_tol), z0s)
 
     # the compiled solve is kept for later fits of the same problem and shapes (:mod:`~.reuse`)
     pkey = reuse.problem_key(problem)
     n_valid = int((np.asarray(problem.data["weight"]) > 0).sum()) if verbose else None  # printed loss scale
-    # solve_z itself too: a replaced solver function (a test's monkeypatch) must not get the old program
-    skey = None if pkey is None else (pkey, solve_z, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol)
+    # _solve itself too: a replaced solver function (a test's monkeypatch) must not get the old program
+    skey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol,
+                                      int(n_cl))
     t0 = time.perf_counter()
-    compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data).compile(),
-                            z0, problem.data)
+    compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data, cl).compile(),
+                            z0, problem.data, cl)
     t1 = time.perf_counter()
-    z, loss, steps, ok = jax.block_until_ready(compiled(z0, problem.data))
+    (z, loss, steps, ok), cov = jax.block_until_ready(compiled(z0, problem.data, cl))
     wall = time.perf_counter() - t1
     z = np.asarray(z)  # on the host: indexing a device array is a program of its own
     loss = np.asarray(loss, np.float64)
@@ -228,8 +253,9 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     if bootstrap:
         boot = _bootstrap(problem, z[best], bootstrap, bootstrap_seed, solver=solver, rtol=rtol, atol=atol,
                           max_steps=max_steps)
+    cov = {k: np.asarray(v)[best] for k, v in cov.items()}
     res = finish(problem, table, z[best], loss[best], np.asarray(steps)[best], np.asarray(ok)[best], wall,
-                 solver, starts, bootstrap=boot)
+                 solver, starts, bootstrap=boot, covariances=cov)
     res.compile_time = t1 - t0
     return res
 

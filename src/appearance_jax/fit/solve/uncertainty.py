@@ -125,7 +125,7 @@ def off_bound(space, x, rel: float = 1e-3):
     return ~near
 
 
-def covariances(problem, x, data, cluster, n_clusters: int) -> dict:
+def covariances(problem, x, data, cluster, n_clusters: int, *, J=None, r=None) -> dict:
     """The iid, HC1, CR1 and CR3 covariances at physical x, and the numerically flat directions.
 
     Traceable (vmap it over a batch). ``cluster`` (N,) int: each row's cluster, ``n_clusters``
@@ -134,11 +134,15 @@ def covariances(problem, x, data, cluster, n_clusters: int) -> dict:
     bread: exactly flat directions projected out, see ``flat``), ``lam`` eigenvalues of the
     column-normalised J^T J relative to the largest, ``flat`` (p,) bool: the parameter has a
     component > ``MEMBER`` in an exactly flat direction, ``s2`` the iid residual variance,
-    ``m`` valid residuals and ``g`` clusters with a valid residual.
+    ``m`` valid residuals and ``g`` clusters with a valid residual. ``J`` (m_all, p) and ``r``
+    (m_all,): the residuals' Jacobian in x and the residuals at x when the caller has them
+    (:func:`at_solution`), else computed here.
     """
-    J = jax.jacfwd(problem.residuals_x)(x, data)
+    if J is None:
+        J = jax.jacfwd(problem.residuals_x)(x, data)
+    if r is None:
+        r = problem.residuals_x(x, data)
     J = J * off_bound(problem.space, x)[None, :]
-    r = problem.residuals_x(x, data)
     valid = (data["weight"] > 0).ravel()
     m = jnp.sum(valid)
     p = J.shape[1]
@@ -169,6 +173,21 @@ def covariances(problem, x, data, cluster, n_clusters: int) -> dict:
     flat = jnp.any((jnp.abs(vec) > MEMBER) & ~ok[None, :], axis=1) & off_bound(problem.space, x)
     return dict(iid=bread * s2, hc1=bread @ meat_e @ bread, cr1=bread @ meat_c @ bread, cr3=cov_jk,
                 lam=lam / big, flat=flat, s2=s2, m=m, g=g)
+
+
+def at_solution(problem, z, data, cluster, n_clusters: int, r, Jz) -> dict:
+    """:func:`covariances` at x = x(z) from a solver's residuals ``r`` and Jacobian ``Jz`` = dr/dz
+    there (:func:`~.lm.levenberg_marquardt` with ``with_jacobian``): no second Jacobian of the
+    model. The transforms act entry by entry (:mod:`~.transforms`), so dr/dx = Jz / (dx/dz)
+    column by column; forward mode scales a column's tangent by dx/dz before propagating it, so
+    the quotient is dr/dx to rounding. A column with dx/dz = 0 (x clipped to a bound) becomes
+    NaN unless :func:`off_bound` drops it anyway: the caller then computes the covariances
+    directly."""
+    x = problem.space.x_from_z(z)
+    d = jax.jvp(problem.space.x_from_z, (z,), (jnp.ones_like(z),))[1]
+    keep = off_bound(problem.space, x)
+    Jx = jnp.where(d != 0, Jz / jnp.where(d != 0, d, 1.0), jnp.where(keep, jnp.nan, 0.0))
+    return covariances(problem, x, data, cluster, n_clusters, J=Jx, r=r)
 
 
 def covariance(problem, x, data):
