@@ -44,7 +44,8 @@ LAMBDA_MAX = 1e16
 
 
 def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10, max_steps: int = 400,
-                        loss_tol: float | None = None, progress=None, with_jacobian: bool = False):
+                        loss_tol: float | None = None, progress=None, with_jacobian: bool = False,
+                        n_residuals: int | None = None):
     """Minimise 1/2 |fn(z, data)|^2 from ``z0`` (p,). Returns ``(z, loss, steps, converged)``
     (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``loss_tol``:
     also converged when the Gauss-Newton decrement 1/2 gᵀ(JᵀJ)⁻¹g at the current point (the
@@ -54,22 +55,25 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     r and J = dr/dz at the returned z, ``(z, loss, steps, converged, r, J)``: when the last step
     was accepted the loop runs one more pass that only takes the Jacobian there (the same traced
     Jacobian, so the program holds one copy of it; the uncertainties at the optimum need no
-    program of their own)."""
+    program of their own). ``n_residuals``: the length of r when the caller knows it (else it
+    is found by tracing ``fn`` once more)."""
     z0 = jnp.asarray(z0)
     dt = z0.dtype
     jac = jax.jacfwd(fn)
 
-    r0 = fn(z0, data)
-    loss0 = 0.5 * jnp.sum(r0 * r0)
+    # r(z0) is not evaluated here but by a first pass of the loop (``start``), as a trial point
+    # with a zero step: the model's forward pass is then traced and compiled once, in the loop
+    # (a copy before the loop cost a fifth of the solve program's compile time)
+    m = jax.eval_shape(fn, z0, data).shape[0] if n_residuals is None else int(n_residuals)
     lam0 = jnp.asarray(LAMBDA0, dt)
     eye = jnp.eye(z0.shape[0], dtype=dt)
 
     def cond(s):
         more = (~s["done"]) & (s["step"] < max_steps)
-        return (more | s["fresh"]) if with_jacobian else more
+        return s["start"] | ((more | s["fresh"]) if with_jacobian else more)
 
     def body(s):
-        z, loss, lam, nu = s["z"], s["loss"], s["lam"], s["nu"]
+        z, loss, lam, nu, start = s["z"], s["loss"], s["lam"], s["nu"], s["start"]
         # with_jacobian: a pass after the last step only refreshes J (the state is kept below)
         final = s["done"] | (s["step"] >= max_steps)
         # the Jacobian at the current point, computed only after a move: one trace of the model's
@@ -89,7 +93,7 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         A = H + (lam * d) * eye
         c = jax.scipy.linalg.cho_factor(A, lower=True)
         dz = -jax.scipy.linalg.cho_solve(c, g)
-        dz = jnp.where(jnp.all(jnp.isfinite(dz)), dz, 0.0)
+        dz = jnp.where(jnp.all(jnp.isfinite(dz)) & ~start, dz, 0.0)
         z_new = z + dz
         r_new = fn(z_new, data)
         loss_new = 0.5 * jnp.sum(r_new * r_new)
@@ -121,18 +125,21 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         nu2 = jnp.where(ok, 2.0, 2.0 * nu)
         stuck = lam2 > LAMBDA_MAX
         if progress is not None:
-            # step 0 for the final pass: _progress_host prints nothing for it
-            jax.debug.callback(progress, jnp.where(final, 0, s["step"] + 1), jnp.where(ok, loss_new, loss))
+            # step 0 for the start and the final pass: _progress_host prints nothing for them
+            jax.debug.callback(progress, jnp.where(final | start, 0, s["step"] + 1), jnp.where(ok, loss_new, loss))
         new = dict(z=z2, r=jnp.where(ok, r_new, r), J=J, fresh=ok, loss=jnp.where(ok, loss_new, loss), lam=lam2,
-                   nu=nu2, step=s["step"] + 1, done=converged | stuck, converged=converged)
-        if not with_jacobian:
-            return new
-        kept = dict(s, J=J, fresh=jnp.asarray(False))
-        return jax.tree_util.tree_map(lambda a, b: jnp.where(final, a, b), kept, new)
+                   nu=nu2, step=s["step"] + 1, done=converged | stuck, converged=converged, start=start)
+        # the start pass: r and the loss at z0 (the trial at dz = 0) and J there; no step counted
+        first = dict(s, r=r_new, J=J, fresh=jnp.asarray(False), loss=loss_new, done=~jnp.isfinite(loss_new),
+                     start=jnp.asarray(False))
+        if with_jacobian:
+            new = jax.tree_util.tree_map(lambda a, b: jnp.where(final, a, b), dict(s, J=J, fresh=jnp.asarray(False)),
+                                         new)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(start, a, b), first, new)
 
-    s0 = dict(z=z0, r=r0, J=jnp.zeros((r0.shape[0], z0.shape[0]), dt), fresh=jnp.asarray(True), loss=loss0,
-              lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0), done=~jnp.isfinite(loss0),
-              converged=jnp.asarray(False))
+    s0 = dict(z=z0, r=jnp.zeros(m, dt), J=jnp.zeros((m, z0.shape[0]), dt), fresh=jnp.asarray(True),
+              loss=jnp.asarray(jnp.inf, dt), lam=lam0, nu=jnp.asarray(2.0, dt), step=jnp.asarray(0),
+              done=jnp.asarray(False), converged=jnp.asarray(False), start=jnp.asarray(True))
     s = jax.lax.while_loop(cond, body, s0)
     if with_jacobian:
         return s["z"], s["loss"], s["step"], s["converged"], s["r"], s["J"]
