@@ -5,7 +5,9 @@ The default solver of :func:`appearance_jax.fit.fit` (``solver="lm"``). It minim
 ``lax.while_loop`` (jittable, vmappable over starts or tables):
 
 - Jacobian J = dr/dz by forward mode (``jax.jacfwd``: one JVP per parameter), computed at the
-  top of an iteration that follows an accepted step (one trace of it in the program);
+  top of an iteration that follows an accepted step (one trace of it in the program); r(z0)
+  comes from a first pass of the loop (a trial at a zero step, not counted as a step) and the
+  accepted trial's r is carried, so the forward pass is traced once too;
 - step: (JᵀJ + λ d I) δ = -Jᵀr, solved by Cholesky, with d the mean of diag(JᵀJ) (isotropic
   damping, as Levenberg's; Marquardt's per-parameter scaling, Moré 1978, crawled for hundreds of
   steps when a parameter sat at a bound of its transform, where its Jacobian column vanishes);
