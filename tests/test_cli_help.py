@@ -2,8 +2,11 @@
 codes and the physically known parameters in the docs as the code has them."""
 
 import argparse
+import os
 import pathlib
 import re
+import subprocess
+import sys
 
 import pytest
 
@@ -105,10 +108,6 @@ def test_known_parameter_records_are_valid():
 
 def _console(argv, tmp_path):
     """Run the console entry point in a fresh interpreter (it ends the process), output piped."""
-    import os
-    import subprocess
-    import sys
-
     code = ("import atexit, sys\n"
             "atexit.register(lambda: print('atexit ran'))\n"
             f"sys.argv = ['appearance-jax'] + {list(argv)!r}\n"

@@ -33,7 +33,7 @@ from .problem import build_problem, entry_arrays
 from . import reuse
 from . import uncertainty as unc
 from .result import FitResult, finish, flags, sigma_kinds
-from .solvers import SOLVERS, _solve, bootstrap_refits, solve_with_covariances
+from .solvers import SOLVERS, bootstrap_refits, solve_with_covariances
 
 
 @dataclass
@@ -178,7 +178,7 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     # kept for later batches of the same problem, shapes and devices (:mod:`~.reuse`); ``run`` also
     # captures the incidence clusters (from the directions) and the solver settings
     pkey = reuse.problem_key(problem)
-    bkey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, int(n_cl),
+    bkey = None if pkey is None else (pkey, solve_with_covariances, solver, rtol, atol, max_steps, int(n_cl),
                                       np.asarray(cl).tobytes(), tuple(d.id for d in devs))
     t0 = time.perf_counter()
     compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)

@@ -83,7 +83,7 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
         # plain evaluation that accepted z (the trial's r_new), not the JVP's primal output
         # (jacfwd(has_aux)): a Monte Carlo model's estimator may differ under differentiation (the
         # cosmetics walk's CRN fit then stopped converging), and r must match the loss; carrying it
-        # keeps the model's forward pass in the program twice (start, trial) instead of three times
+        # (and taking r(z0) from the start pass) keeps one copy of the forward pass in the program
         r = s["r"]
         J = jax.lax.cond(s["fresh"], lambda: jac(z, data), lambda: s["J"])
         g = J.T @ r

@@ -1,8 +1,9 @@
 """Compiled fit programs kept in memory and reused by later fits in the same process.
 
 A fit traces and compiles its solve (with ``solver="lm"`` the covariances at each start's
-optimum are part of it; other solvers compile them apart) and the model's fitted values. Across calls of :func:`~appearance_jax.fit.solve.fit` with the same model, free and
-fixed parameters, metric, solver settings and array shapes, those programs are the same: only
+optimum are part of it; other solvers compile them apart) and the model's fitted values.
+Across calls of :func:`~appearance_jax.fit.solve.fit` with the same model, free and fixed
+parameters, metric, solver settings and array shapes, those programs are the same: only
 their array arguments (the table's directions, data, weights and masks, the starts) differ. This
 module keeps them, keyed by everything the traced code depends on besides those arguments, so
 that a re-run, or a fit of another table of the same shape, skips tracing and compiling (the
