@@ -29,6 +29,7 @@ stale entry is never used for a different program; deleting the directory is alw
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 
@@ -117,10 +118,34 @@ def ensure() -> str | None:
         return None
 
 
+@contextlib.contextmanager
+def bypassed():
+    """JAX's persistent cache neither read nor written by what compiles inside (this process).
+
+    For a program that :mod:`~appearance_jax.core.program_store` will write: an executable JAX
+    loaded from its cache cannot be written out again whole (XLA:CPU keeps no object code of a
+    loaded program; the copy fails with "Function ... not found" when it runs)."""
+    if not jax.config.jax_enable_compilation_cache:
+        yield
+        return
+    jax.config.update("jax_enable_compilation_cache", False)
+    _reset_jax_cache_state()
+    try:
+        yield
+    finally:
+        jax.config.update("jax_enable_compilation_cache", True)
+        _reset_jax_cache_state()
+
+
+def own_dir() -> str | None:
+    """The directory this module turned the cache on at, or None (off, or JAX's own directory)."""
+    return None if _state["disabled"] else _state["dir"]
+
+
 def active_dir() -> str | None:
     """The directory JAX writes compiled programs to now, or None."""
     return jax.config.jax_compilation_cache_dir or None
 
 
 __all__ = ["ENV_VAR", "OFF_VALUES", "MIN_COMPILE_TIME_S", "MAX_BYTES", "default_dir", "enable", "disable", "ensure",
-           "active_dir"]
+           "own_dir", "active_dir", "bypassed"]

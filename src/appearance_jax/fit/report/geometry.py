@@ -19,6 +19,7 @@ import numpy as np
 
 from ...core.frame import in_plane_directions
 from ...core.model import estimate_of
+from ...core.params import validate
 from ..tables.table import Table
 
 __all__ = ["eval_in_plane", "PlanePoints", "plane_points", "reciprocity_fill", "cell_edges", "grid_image",
@@ -39,10 +40,24 @@ def eval_in_plane(model, params, theta_i, theta_o, n_bands: int | None = None) -
         n_bands: broadcast the bands axis to this many bands (a grey model on a colour table).
     """
     wi, wo = _in_plane_directions(np.asarray(theta_i), np.asarray(theta_o))
-    out = np.asarray(estimate_of(model.eval(params, wi, wo)))
+    out = np.asarray(estimate_of(_evaluate(model, params, wi, wo)))
     if out.ndim == 1:
         out = out[:, None]
     return out if n_bands is None else np.broadcast_to(out, (out.shape[0], n_bands))
+
+
+def _evaluate(model, params, wi, wo):
+    """``model.eval(params, wi, wo)``; for a registered deterministic model through a compiled
+    program kept in memory and on disk (:mod:`~appearance_jax.fit.solve.reuse`): a report
+    re-drawn in a new process then does not trace the model again."""
+    from ..solve import reuse
+
+    name = reuse.registered_name(model)
+    if name is None or model.stochastic:
+        return model.eval(params, wi, wo)
+    validate(params, model.Params)
+    return reuse.cached("eval_in_plane", reuse.identity(model), lambda: jax.jit(model.eval.kernel).lower(params, wi, wo).compile(),
+                        params, wi, wo, disk=name)(params, wi, wo)
 
 
 @dataclass

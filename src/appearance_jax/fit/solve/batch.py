@@ -33,7 +33,7 @@ from .problem import build_problem, entry_arrays
 from . import reuse
 from . import uncertainty as unc
 from .result import FitResult, finish, flags, sigma_kinds
-from .solvers import SOLVERS, bootstrap_refits, solve_with_covariances
+from .solvers import SOLVERS, bootstrap_refits, solve_with_covariances, stock_solve
 
 
 @dataclass
@@ -181,7 +181,10 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     bkey = None if pkey is None else (pkey, solve_with_covariances, solver, rtol, atol, max_steps, int(n_cl),
                                       np.asarray(cl).tobytes(), tuple(d.id for d in devs))
     t0 = time.perf_counter()
-    compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data)
+    # on disk too for one device (a stored program's devices are ids of this process' client)
+    dkey = reuse.disk_key(problem) if bkey is not None and n_dev == 1 and stock_solve(solve_with_covariances) else None
+    disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, int(n_cl), np.asarray(cl))
+    compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data, disk=disk)
     t1 = time.perf_counter()
     z, x, out, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1

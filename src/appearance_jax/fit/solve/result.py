@@ -301,8 +301,10 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     bound, flat = flags(sp, x, raw, [out[method]], exact)
     params = reuse.cached("params_from_x", pkey, lambda: jax.jit(sp.params_from_x), x)(x)
     w = np.asarray(data["weight"]) > 0
-    # jitted: op by op, a coated model's eval would compile dozens of small programs
-    evaluate = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate), params, data)
+    # compiled: op by op, a coated model's eval would compile dozens of small programs; kept on
+    # disk too (a new process then skips tracing the model)
+    evaluate = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate).lower(params, data).compile(),
+                            params, data, disk=None if pkey is None else reuse.disk_key(problem))
     fitted = np.asarray(evaluate(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))
     m = int(w.sum())

@@ -17,6 +17,10 @@ covariances' scale), the PRNG key bytes of a stochastic
 model and its keyword arguments. A problem with anything unhashable in them is not cached.
 The shapes and dtypes of the arguments, the x64 setting, the default device and backend and the
 matmul precision are part of every entry's key.
+
+A compiled program (the solve, a batch) can also be kept on disk for later processes
+(:mod:`appearance_jax.core.program_store`): its caller passes a content key (:func:`disk_key`
+plus its own settings), which names a registered model by its name instead of by identity.
 """
 
 from __future__ import annotations
@@ -26,7 +30,9 @@ import collections
 import jax
 import numpy as np
 
-__all__ = ["problem_key", "cached", "clear", "MAX_ENTRIES"]
+from ...core import compile_cache, program_store
+
+__all__ = ["problem_key", "disk_key", "registered_name", "identity", "cached", "clear", "MAX_ENTRIES"]
 
 MAX_ENTRIES = 64  # least recently used programs beyond this are dropped
 _CACHE: "collections.OrderedDict[tuple, object]" = collections.OrderedDict()
@@ -46,6 +52,11 @@ class _Same:
 
     def __eq__(self, other):
         return isinstance(other, _Same) and other.obj is self.obj
+
+
+def identity(obj) -> _Same:
+    """A key part that stands for ``obj`` itself (compared by identity, kept alive with the entry)."""
+    return _Same(obj)
 
 
 def _leaf_key(x):
@@ -72,15 +83,40 @@ def problem_key(problem) -> tuple | None:
         return None
 
 
+def registered_name(model) -> str | None:
+    """``model``'s registry name if it is the registry's own instance of that name, else None (a
+    user's model or a modified copy: its programs are kept in memory only)."""
+    from ... import registry
+
+    try:
+        return model.name if registry.get(model.name) is model else None
+    except (KeyError, ValueError, TypeError, AttributeError):
+        return None
+
+
+def disk_key(problem) -> tuple | None:
+    """What :func:`problem_key` holds, by content: the model as its registry name (the package's
+    files are part of every stored entry's key), or None when :func:`registered_name` has none."""
+    if registered_name(problem.model) is None:
+        return None
+    leaves, treedef = jax.tree_util.tree_flatten(problem.space.template)
+    key = problem.key
+    if key is not None and jax.dtypes.issubdtype(getattr(key, "dtype", None), jax.dtypes.prng_key):
+        key = (str(jax.random.key_impl(key)), jax.random.key_data(key))
+    return (problem.model.name, treedef, tuple(np.asarray(v) for v in leaves), problem.space.fields, problem.metric,
+            float(problem.floor), bool(problem.absolute_sigma), key, dict(problem.model_kwargs))
+
+
 def _avals(*args):
     leaves, treedef = jax.tree_util.tree_flatten(args)
     return treedef, tuple((np.shape(v), np.dtype(v.dtype if hasattr(v, "dtype") else type(v)).str) for v in leaves)
 
 
-def cached(tag, key, make, *args):
+def cached(tag, key, make, *args, disk=None):
     """The program ``make()`` (a jitted or compiled function of ``args``) for ``(tag, key)``, the
     shapes and dtypes of ``args`` and the settings below; built once and kept. ``key`` None: not
-    kept."""
+    kept. ``disk``: the same key by content (module docstring), for a ``make()`` that returns a
+    compiled program: it is then looked up on disk first and written there once compiled."""
     if key is None:
         return make()
     # the settings a trace and its executable depend on beyond the key: precision and the device
@@ -90,7 +126,15 @@ def cached(tag, key, make, *args):
     if fn is not None:
         _CACHE.move_to_end(full)
         return fn
-    fn = make()
+    name = None if disk is None else program_store.entry_name(tag, disk, args)
+    fn = program_store.load(name, args)
+    if fn is None and name is not None and program_store.directory() is not None:
+        with compile_cache.bypassed():  # a program JAX loaded from its cache cannot be stored
+            fn = make()
+        if isinstance(fn, jax.stages.Compiled):
+            program_store.save(name, fn)
+    elif fn is None:
+        fn = make()
     _CACHE[full] = fn
     while len(_CACHE) > MAX_ENTRIES:
         _CACHE.popitem(last=False)

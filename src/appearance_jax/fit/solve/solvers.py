@@ -152,6 +152,16 @@ def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, ma
     return (z, 0.5 * jnp.sum(r * r), sol.stats["num_steps"], ok), None
 
 
+_OWN = {"_solve": _solve, "solve_with_covariances": solve_with_covariances}
+
+
+def stock_solve(entry) -> bool:
+    """Whether ``entry`` (a solve function of this module, as a caller holds it) and the ``_solve``
+    it calls are the ones this module defines: only programs traced from those are stored on disk
+    (:mod:`~appearance_jax.core.program_store`; a test may replace either)."""
+    return _solve is _OWN["_solve"] and _OWN.get(getattr(entry, "__name__", None)) is entry
+
+
 def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights=None,
         max_theta_deg: float | None = 85.0, use_sigma: bool = True, solver: str = "lm", rtol: float = 1e-8,
         atol: float = 1e-10, max_steps: int = 400, n_starts: int = 1, seed: int = 0, key=None,
@@ -234,9 +244,13 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     # _solve itself too: a replaced solver function (a test's monkeypatch) must not get the old program
     skey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol,
                                       int(n_cl))
+    # and on disk for later processes (:mod:`~appearance_jax.core.program_store`), when it is this
+    # module's own solve of a registered model and prints nothing (a printer is a host callback)
+    dkey = reuse.disk_key(problem) if skey is not None and stock_solve(_solve) and not verbose else None
+    disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, loss_tol, int(n_cl))
     t0 = time.perf_counter()
     compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data, cl).compile(),
-                            z0, problem.data, cl)
+                            z0, problem.data, cl, disk=disk)
     t1 = time.perf_counter()
     (z, loss, steps, ok), cov = jax.block_until_ready(compiled(z0, problem.data, cl))
     wall = time.perf_counter() - t1
