@@ -25,6 +25,10 @@ every program): zlib took 2.0 s to compress them and 0.17 s to read them back, z
 
 Entries are keyed by JAX on the program, the compiler options and the jax/jaxlib version, so a
 stale entry is never used for a different program; deleting the directory is always safe.
+
+The fit's own programs are also kept there, loaded and keyed by what they were traced from
+(:mod:`~appearance_jax.core.program_store`, subdirectory ``programs``): the same switches turn it
+off.
 """
 
 from __future__ import annotations
