@@ -188,3 +188,16 @@ def test_off_with_the_compilation_cache(monkeypatch):
     compiled, x = _tiny()
     assert not program_store.save("off.jaxprog", compiled)
     assert program_store.load("off.jaxprog", (x,)) is None
+
+
+def test_the_reports_model_curves_equal_the_models_eval():
+    from appearance_jax.core.frame import in_plane_directions
+    from appearance_jax.fit.report.geometry import eval_in_plane
+
+    p = MODEL.Params(alpha=0.27, specular_reflectance=(0.9, 0.8, 0.7))
+    ti, to = np.deg2rad(np.full(41, 30.0)), np.deg2rad(np.linspace(-89, 89, 41))
+    stored = eval_in_plane(MODEL, p, ti, to)  # a compiled kernel kept by reuse (and on disk with the cache on)
+    mine = eval_in_plane(copy.copy(MODEL), p, ti, to)  # not the registry's: the model's own eval
+    wi, wo = jax.jit(in_plane_directions)(ti, to)
+    np.testing.assert_array_equal(stored, np.asarray(MODEL.eval(p, wi, wo)))
+    np.testing.assert_array_equal(stored, mine)

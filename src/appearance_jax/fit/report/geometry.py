@@ -53,11 +53,12 @@ def _evaluate(model, params, wi, wo):
     from ..solve import reuse
 
     name = reuse.registered_name(model)
-    if name is None or model.stochastic:
+    kernel = getattr(model.eval, "kernel", None)
+    if name is None or kernel is None or model.stochastic:
         return model.eval(params, wi, wo)
-    validate(params, model.Params)
-    return reuse.cached("eval_in_plane", reuse.identity(model), lambda: jax.jit(model.eval.kernel).lower(params, wi, wo).compile(),
-                        params, wi, wo, disk=name)(params, wi, wo)
+    validate(params, model.Params)  # what model.eval checks (the directions are ours)
+    make = lambda: jax.jit(kernel).lower(params, wi, wo).compile()  # noqa: E731
+    return reuse.cached("eval_in_plane", reuse.identity(model), make, params, wi, wo, disk=name)(params, wi, wo)
 
 
 @dataclass
