@@ -237,6 +237,8 @@ def path_directions(normal, view, n_paths: int = 8) -> PathDirections:
     Recursion (``lax.scan``): n^(i+1) = n^(i) - 2 (n^(i) . o^(i)) o^(i),
     i^(i+1) = -o^(i), o^(i+1) = o^(i) - 2 (o^(i) . n^(i+1)) n^(i+1); i^(0) is the mirror
     direction 2 (n^(0) . o^(0)) n^(0) - o^(0). See the module docstring for why o^(0) = view.
+    n^(i+1) and o^(i+1) are renormalised at every step: the recursion amplifies a vector's norm
+    error ~18x per interaction.
     """
     _check_n_paths(n_paths)
     return _path_directions(_as_vec3(normal, "normal"), _as_vec3(view, "view"), int(n_paths))
@@ -253,8 +255,11 @@ def _path_directions(normal, view, n_paths):
 
     def step(carry, _):
         n, inc, o = carry
-        n_next = n - o * (2.0 * dot(n, o))
-        o_next = o - n_next * (2.0 * dot(o, n_next))
+        # renormalised: a reflection about a vector of norm 1 + e changes the reflected vector's
+        # squared norm by ~4 e, so without it a 1-ulp error in the inputs grows ~18x per
+        # interaction (1.6e-7 at the 8th in float64, machine-dependent)
+        n_next = normalize(n - o * (2.0 * dot(n, o)))
+        o_next = normalize(o - n_next * (2.0 * dot(o, n_next)))
         return (n_next, -o, o_next), (n, inc, o)
 
     _, (ns, incs, os) = jax.lax.scan(step, (n0, i0, o0), None, length=n_paths)
