@@ -11,6 +11,9 @@ the argument shapes and dtypes, and a fingerprint of everything else a trace can
 Python versions, the JAX settings that change a trace, ``XLA_FLAGS`` and the CPU. A change to any
 of them is a new key; an entry is never looked up by anything weaker.
 
+The key sees this package's files, not its objects: a function replaced at run time (a test's
+monkeypatch) is invisible to it, so such code must turn the store off (below).
+
 It is on exactly when this package's compilation cache is (same switches: ``--no-compile-cache``,
 ``APPEARANCE_JAX_COMPILE_CACHE=off``, :func:`~appearance_jax.core.compile_cache.disable`), in the
 directory ``programs`` inside it (``~/.cache/appearance-jax/xla/programs``); a cache directory

@@ -142,5 +142,10 @@ def cached(tag, key, make, *args, disk=None):
 
 
 def clear() -> None:
-    """Forget every kept program (they are rebuilt on the next fit)."""
+    """Forget every program kept in memory (they are rebuilt, or loaded from disk, on the next fit).
+
+    Programs on disk (:mod:`~appearance_jax.core.program_store`) are keyed by this package's files,
+    not by the functions' objects: code patched at run time (a test's monkeypatch of a function the
+    solve traces) is not seen there. Turn the store off with the compilation cache for that
+    (:func:`appearance_jax.core.compile_cache.disable`); a replaced ``solvers._solve`` is detected."""
     _CACHE.clear()
