@@ -201,3 +201,22 @@ def test_the_reports_model_curves_equal_the_models_eval():
     wi, wo = jax.jit(in_plane_directions)(ti, to)
     np.testing.assert_array_equal(stored, np.asarray(MODEL.eval(p, wi, wo)))
     np.testing.assert_array_equal(stored, mine)
+
+
+def test_a_stored_batch_equals_the_compiled_one(store):
+    from appearance_jax.fit.solve import fit_batch
+
+    t = _table(9)
+    wi, wo = t.directions()
+    values = np.stack([np.asarray(MODEL.eval(MODEL.Params(alpha=a), wi, wo), np.float64) for a in (0.2, 0.35)])
+    kw = dict(fix={"eta": None, "k": None}, devices=jax.devices()[:1])
+    reuse.clear()
+    saved, loaded = program_store.stats()["saved"], program_store.stats()["loaded"]
+    a = fit_batch(MODEL, t, values, **kw)  # compiled and written
+    assert program_store.stats()["saved"] == saved + 1
+    reuse.clear()
+    b = fit_batch(MODEL, t, values, **kw)  # loaded from the store
+    assert program_store.stats()["loaded"] == loaded + 1
+    for k in ("x", "sigma", "loss", "iterations"):
+        np.testing.assert_array_equal(getattr(a, k), getattr(b, k))
+    np.testing.assert_allclose(a.x[:, 0], [0.2, 0.35], rtol=1e-6)
