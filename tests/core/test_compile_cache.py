@@ -92,3 +92,27 @@ def test_cli_flag_turns_it_off(tmp_path):
                          env={**os.environ, cc.ENV_VAR: str(tmp_path / "xla")})
     assert out.returncode == 0, out.stderr
     assert f"DIR {tmp_path / 'xla'}" in out.stdout
+
+
+def test_fit_programs_compile_with_the_cpu_options_and_fall_back():
+    f = jax.jit(lambda x: jnp.sin(x) * 2.5)
+    x = jnp.arange(4.0)
+    assert bool(jnp.all(cc.compile_lowered(f.lower(x))(x) == f(x)))
+
+    class Lowered:  # records what compile_lowered asks for; the first XLA does not know the option
+        def __init__(self, known):
+            self.known, self.calls = known, []
+
+        def compile(self, compiler_options=None):
+            self.calls.append(compiler_options)
+            if compiler_options and not self.known:
+                raise jax.errors.JaxRuntimeError("INVALID_ARGUMENT: No such compile option: 'x'")
+            return "compiled"
+
+    on_cpu = jax.default_backend() == "cpu"
+    known = Lowered(known=True)
+    assert cc.compile_lowered(known) == "compiled"
+    assert known.calls == ([cc.CPU_FIT_OPTIONS] if on_cpu else [None])
+    unknown = Lowered(known=False)
+    assert cc.compile_lowered(unknown) == "compiled"  # the defaults, not an error
+    assert unknown.calls == ([cc.CPU_FIT_OPTIONS, None] if on_cpu else [None])

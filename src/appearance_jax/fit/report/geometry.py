@@ -17,6 +17,7 @@ from dataclasses import dataclass, field, replace
 import jax
 import numpy as np
 
+from ...core import compile_cache
 from ...core.frame import in_plane_directions
 from ...core.model import estimate_of
 from ...core.params import validate
@@ -57,7 +58,7 @@ def _evaluate(model, params, wi, wo):
     if name is None or kernel is None or model.stochastic:
         return model.eval(params, wi, wo)
     validate(params, model.Params)  # what model.eval checks (the directions are ours)
-    make = lambda: jax.jit(kernel).lower(params, wi, wo).compile()  # noqa: E731
+    make = lambda: compile_cache.compile_lowered(jax.jit(kernel).lower(params, wi, wo))  # noqa: E731
     return reuse.cached("eval_in_plane", reuse.identity(model), make, params, wi, wo, disk=name)(params, wi, wo)
 
 

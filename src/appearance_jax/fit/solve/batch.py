@@ -184,7 +184,8 @@ def fit_batch(model, table: Table, values, *, sigma=None, mask=None, init=None, 
     # on disk too for one device (a stored program's devices are ids of this process' client)
     dkey = reuse.disk_key(problem) if bkey is not None and n_dev == 1 and stock_solve(solve_with_covariances) else None
     disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, int(n_cl), np.asarray(cl))
-    compiled = reuse.cached("batch", bkey, lambda: jax.jit(run).lower(z0, data).compile(), z0, data, disk=disk)
+    compiled = reuse.cached("batch", bkey, lambda: compile_cache.compile_lowered(jax.jit(run).lower(z0, data)),
+                            z0, data, disk=disk)
     t1 = time.perf_counter()
     z, x, out, loss, steps, ok = jax.block_until_ready(compiled(z0, data))
     wall = time.perf_counter() - t1

@@ -22,6 +22,7 @@ from typing import Any
 import jax
 import numpy as np
 
+from ...core import compile_cache
 from ..tables.table import Table
 from . import reuse
 from . import uncertainty as unc
@@ -303,7 +304,8 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     w = np.asarray(data["weight"]) > 0
     # compiled: op by op, a coated model's eval would compile dozens of small programs; kept on
     # disk too (a new process then skips tracing the model)
-    evaluate = reuse.cached("evaluate", pkey, lambda: jax.jit(problem.evaluate).lower(params, data).compile(),
+    evaluate = reuse.cached("evaluate", pkey,
+                            lambda: compile_cache.compile_lowered(jax.jit(problem.evaluate).lower(params, data)),
                             params, data, disk=None if pkey is None else reuse.disk_key(problem))
     fitted = np.asarray(evaluate(params, data), np.float64)
     metrics = error_metrics(fitted, np.asarray(data["f"]), w, np.asarray(data["cos_i"]))

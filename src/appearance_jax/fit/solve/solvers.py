@@ -249,7 +249,8 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     dkey = reuse.disk_key(problem) if skey is not None and stock_solve(_solve) and not verbose else None
     disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, loss_tol, int(n_cl))
     t0 = time.perf_counter()
-    compiled = reuse.cached("solve", skey, lambda: jax.jit(run).lower(z0, problem.data, cl).compile(),
+    compiled = reuse.cached("solve", skey,
+                            lambda: compile_cache.compile_lowered(jax.jit(run).lower(z0, problem.data, cl)),
                             z0, problem.data, cl, disk=disk)
     t1 = time.perf_counter()
     (z, loss, steps, ok), cov = jax.block_until_ready(compiled(z0, problem.data, cl))
