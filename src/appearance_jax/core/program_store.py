@@ -257,9 +257,12 @@ def save(name: str | None, compiled) -> bool:
             return False
         folder.mkdir(parents=True, exist_ok=True, mode=0o700)
         tmp = folder / f".{name}.{os.getpid()}.tmp"
-        with open(tmp, "wb") as f:
-            f.write(buf.getvalue())
-        os.replace(tmp, folder / name)  # atomic: a reader sees the whole entry or none
+        try:
+            with open(tmp, "wb") as f:
+                f.write(buf.getvalue())
+            os.replace(tmp, folder / name)  # atomic: a reader sees the whole entry or none
+        finally:
+            tmp.unlink(missing_ok=True)  # a failed write (disk full) leaves no partial file
         _evict(folder)
     except Exception:  # noqa: BLE001 - a program that cannot be stored is compiled next time
         return False

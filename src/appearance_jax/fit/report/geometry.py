@@ -21,6 +21,7 @@ from ...core import compile_cache
 from ...core.frame import in_plane_directions
 from ...core.model import estimate_of
 from ...core.params import validate
+from ..solve import reuse
 from ..tables.table import Table
 
 __all__ = ["eval_in_plane", "PlanePoints", "plane_points", "reciprocity_fill", "cell_edges", "grid_image",
@@ -51,8 +52,6 @@ def _evaluate(model, params, wi, wo):
     """``model.eval(params, wi, wo)``; for a registered deterministic model through a compiled
     program kept in memory and on disk (:mod:`~appearance_jax.fit.solve.reuse`): a report
     re-drawn in a new process then does not trace the model again."""
-    from ..solve import reuse
-
     name = reuse.registered_name(model)
     kernel = getattr(model.eval, "kernel", None)
     if name is None or kernel is None or model.stochastic:

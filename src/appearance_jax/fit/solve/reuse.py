@@ -64,17 +64,26 @@ def _leaf_key(x):
     return (a.dtype.str, a.shape, a.tobytes())
 
 
+def _template_and_key(problem):
+    """The Params template's tree structure and leaves, and the PRNG key as (implementation name
+    or None, key data) or None: the parts of a problem's keys that need unpacking."""
+    leaves, treedef = jax.tree_util.tree_flatten(problem.space.template)
+    key = problem.key
+    if key is not None and jax.dtypes.issubdtype(getattr(key, "dtype", None), jax.dtypes.prng_key):
+        key = (str(jax.random.key_impl(key)), jax.random.key_data(key))
+    elif key is not None:
+        key = (None, key)
+    return treedef, leaves, key
+
+
 def problem_key(problem) -> tuple | None:
     """What a :class:`~.problem.Problem`'s traced programs depend on besides their array
     arguments (module docstring), or None when some of it is not hashable."""
     try:
-        leaves, treedef = jax.tree_util.tree_flatten(problem.space.template)
-        key = problem.key
-        if key is not None and jax.dtypes.issubdtype(getattr(key, "dtype", None), jax.dtypes.prng_key):
-            key = jax.random.key_data(key)
+        treedef, leaves, key = _template_and_key(problem)
         k = (_Same(problem.model), treedef, tuple(_leaf_key(v) for v in leaves), problem.space.fields,
              problem.metric, float(problem.floor), bool(problem.absolute_sigma),
-             None if key is None else _leaf_key(key),
+             None if key is None else (key[0], _leaf_key(key[1])),
              tuple(sorted((n, v if not hasattr(v, "shape") else _leaf_key(v))
                           for n, v in problem.model_kwargs.items())))
         hash(k)
@@ -99,10 +108,7 @@ def disk_key(problem) -> tuple | None:
     files are part of every stored entry's key), or None when :func:`registered_name` has none."""
     if registered_name(problem.model) is None:
         return None
-    leaves, treedef = jax.tree_util.tree_flatten(problem.space.template)
-    key = problem.key
-    if key is not None and jax.dtypes.issubdtype(getattr(key, "dtype", None), jax.dtypes.prng_key):
-        key = (str(jax.random.key_impl(key)), jax.random.key_data(key))
+    treedef, leaves, key = _template_and_key(problem)
     return (problem.model.name, treedef, tuple(np.asarray(v) for v in leaves), problem.space.fields, problem.metric,
             float(problem.floor), bool(problem.absolute_sigma), key, dict(problem.model_kwargs))
 
@@ -126,9 +132,10 @@ def cached(tag, key, make, *args, disk=None):
     if fn is not None:
         _CACHE.move_to_end(full)
         return fn
-    name = None if disk is None else program_store.entry_name(tag, disk, args)
+    on_disk = disk is not None and program_store.directory() is not None
+    name = program_store.entry_name(tag, disk, args) if on_disk else None
     fn = program_store.load(name, args)
-    if fn is None and name is not None and program_store.directory() is not None:
+    if fn is None and name is not None:
         with compile_cache.bypassed():  # a program JAX loaded from its cache cannot be stored
             fn = make()
         if isinstance(fn, jax.stages.Compiled):

@@ -183,8 +183,7 @@ def at_solution(problem, z, data, cluster, n_clusters: int, r, Jz) -> dict:
     the quotient is dr/dx to rounding. A column with dx/dz = 0 (x clipped to a bound) becomes
     NaN unless :func:`off_bound` drops it anyway: the caller then computes the covariances
     directly."""
-    x = problem.space.x_from_z(z)
-    d = jax.jvp(problem.space.x_from_z, (z,), (jnp.ones_like(z),))[1]
+    x, d = jax.jvp(problem.space.x_from_z, (z,), (jnp.ones_like(z),))
     keep = off_bound(problem.space, x)
     Jx = jnp.where(d != 0, Jz / jnp.where(d != 0, d, 1.0), jnp.where(keep, jnp.nan, 0.0))
     return covariances(problem, x, data, cluster, n_clusters, J=Jx, r=r)
