@@ -95,7 +95,7 @@ def run(name: str):
     res = fit(model, table, init=start, fix=fix, metric=metric)
     total = time.perf_counter() - t0
     again = []
-    for _ in range(3):  # the whole fit() again in this process: programs kept (fit.solve.reuse)
+    for _ in range(10):  # the whole fit() again in this process: programs kept (fit.solve.reuse)
         t0 = time.perf_counter()
         fit(model, table, init=start, fix=fix, metric=metric)
         again.append(time.perf_counter() - t0)
@@ -173,7 +173,7 @@ def main():
         print(f"  ratio Powell/LM time: {pw['time'] / lm['time']:.1f}x (solve only), "
               f"{(pw['time'] + pw['compile']) / (lm['time'] + lm['compile']):.1f}x (incl. compile), "
               f"{pw['total'] / lm['total']:.2f}x (whole fit() incl. covariances vs Powell incl. compile)")
-        print(f"  warm re-run in this process: the whole fit() {lm['again']:.4f} s (best of 3) vs Powell's solve "
+        print(f"  warm re-run in this process: the whole fit() {lm['again']:.4f} s (best of 10) vs Powell's solve "
               f"{pw['time']:.4f} s: {pw['time'] / lm['again']:.1f}x")
         print(f"  loss Powell - LM: {pw['loss'] - lm['loss']:.3e};  max |x_Powell - x_LM| = "
               f"{np.max(np.abs(pw['x'] - lm['x'])):.2e}")
