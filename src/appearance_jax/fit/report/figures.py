@@ -55,7 +55,10 @@ def _title(result) -> str:
 
 
 def _style_map_axes(ax, title):
-    ax.set_title(title, fontsize=10)
+    # y=1.0 (here and below): a fixed title position; matplotlib's automatic one measures every tick
+    # label of the axes at each draw to clear decorations above them, and these axes have none there
+    # (the same pixels; ~5 % of the report's time)
+    ax.set_title(title, fontsize=10, y=1.0)
     ax.set_xlabel(r"signed $\theta_o$ [deg]  (< 0: retro side, > 0: forward)")
     ax.set_ylabel(r"$\theta_i$ [deg]")
     ax.set_facecolor("black")
@@ -261,7 +264,7 @@ def _scatter_axes(ax, t, result, lum=False):
     ax.set_ylabel("fitted f [1/sr]")
     e = result.metrics
     ax.set_title(f"fitted vs measured ({sum(a.size for *_, a, _ in series)} values)\n"
-                 f"rmse {e.get('rmse', np.nan):.3g} 1/sr, log_rmse {e.get('log_rmse', np.nan):.3g}", fontsize=10)
+                 f"rmse {e.get('rmse', np.nan):.3g} 1/sr, log_rmse {e.get('log_rmse', np.nan):.3g}", fontsize=10, y=1.0)
     ax.grid(True, which="both", alpha=0.3)
     if len(series) <= 6:
         ax.legend(fontsize=8, markerscale=3)
@@ -376,7 +379,7 @@ def slices_figure(result, *, model=None, dpi=90):
         ax.axvline(ti, color="0.25", lw=1.0, ls="--", gid="mirror", label=r"mirror $\theta_o=\theta_i$")
         if ti > 0:
             ax.axvline(-ti, color="0.55", lw=1.0, ls=":", gid="retro", label=r"retro $\theta_o=-\theta_i$")
-        ax.set_title(rf"$\theta_i$ = {ti:g}°", fontsize=10)
+        ax.set_title(rf"$\theta_i$ = {ti:g}°", fontsize=10, y=1.0)
         ax.set_xlabel(r"signed $\theta_o$ [deg]  (< 0: retro side, > 0: forward)", fontsize=9)
         ax.set_ylabel(r"$f\cos\theta_o$ [1/sr] (log)", fontsize=9)
         ax.grid(True, which="major", alpha=0.3)
