@@ -30,34 +30,21 @@ def test_merl_fabrics_recipe_on_two_fabrics(tmp_path):
 
 
 # the cloth fit of notebooks/06_cloth.ipynb in its fast mode (the one the test suite runs): red-fabric's
-# gonio proxy table, satin, 4 rotations, T = 4 tangent samples, the default start, cos-log, BFGS, 50 steps
-NOTEBOOK_CLOTH_FIT = dict(rotations=4, samples=4, steps=50, solver="bfgs")
+# gonio proxy table, satin, 4 rotations, T = 4 tangent samples, the default start, cos-log, LM, 50 steps
+NOTEBOOK_CLOTH_FIT = dict(rotations=4, samples=4, steps=50)
 
 
-def test_cloth_merl_recipe_runs_and_reports_both_metrics(tmp_path, monkeypatch):
+def test_cloth_merl_recipe_runs_and_reports_both_metrics(tmp_path):
     """fitting/cloth_merl.py on one proxy, one weave and few steps (the full run is in the recipe): the
     cloth fit reaches a small error, and the reports name the best model per metric.
 
     The cloth fit (one XLA program: compiling it is most of this test's time, and of the notebook's)
-    uses exactly the settings of notebooks/06_cloth.ipynb's fast mode (NOTEBOOK_CLOTH_FIT), with BFGS
-    instead of the recipe's Levenberg-Marquardt (fit_batch patched below): the two then compile the
-    same program, which the run's shared compilation cache (tests/conftest.py) builds once for both
-    (measured, whichever runs second: the notebook's fit 19 instead of 36 CPU-seconds, this recipe 23
-    instead of 44). The recipe's own code
-    (fit_cloth, result_rows, best_per_fabric, write_best, plot_errors, main) runs unchanged; fit_batch
-    with LM is tested in tests/fit/solve and by test_merl_fabrics_recipe_on_two_fabrics. Should the
-    notebook's settings change, this test still passes; it then compiles a program of its own.
+    uses exactly the settings of notebooks/06_cloth.ipynb's fast mode (NOTEBOOK_CLOTH_FIT) and the same
+    default solver, so the two compile the same program, which the run's shared compilation cache
+    (tests/conftest.py) builds once for both. The recipe's code (fit_cloth, result_rows,
+    best_per_fabric, write_best, plot_errors, main) runs unchanged. Should the notebook's settings
+    change, this test still passes; it then compiles a program of its own.
     """
-    from appearance_jax.fit.solve import batch
-
-    fit_batch = batch.fit_batch
-
-    def cloth_with_bfgs(model, *args, **kw):
-        if model.name == "cloth_weave":
-            kw["solver"] = NOTEBOOK_CLOTH_FIT["solver"]
-        return fit_batch(model, *args, **kw)
-
-    monkeypatch.setattr(batch, "fit_batch", cloth_with_bfgs)  # cloth_merl.fit_cloth imports it when called
     mod = _load("cloth_merl")
     assert mod.main(["--out", str(tmp_path), "--fabrics", "red-fabric", "--weaves", "satin", "--baselines",
                      "lambert", "--steps", str(NOTEBOOK_CLOTH_FIT["steps"]),
