@@ -222,3 +222,60 @@ def test_covariances_from_the_solvers_jacobian_are_the_models(case):
     batch = fit_batch(model, table, table.values[None], **build)
     np.testing.assert_allclose(batch.sigma_hc1[0], np.sqrt(np.diag(_direct_covariances(
         model, table, batch.x[0], **build)["hc1"])), rtol=1e-7, atol=1e-14)
+
+
+@pytest.mark.parametrize("dtype", ["float64", "float32"])
+def test_host_covariances_are_the_traced_ones(dtype):
+    """fit() takes its covariances in numpy on the host (uncertainty.covariances_host) from the
+    solve's r and J; batches take them inside their program (uncertainty.covariances). Both are one
+    formula (_estimates with np or jnp): on the same r and J (masked entries, a parameter on its
+    bound, a cluster with no valid value, a flat direction) every estimate must agree to rounding."""
+    import jax
+    import jax.numpy as jnp
+
+    from appearance_jax.fit.solve.problem import build_problem
+    from appearance_jax.fit.solve.uncertainty import covariances, covariances_host
+
+    table = _table()
+    model = registry.get("rough_conductor")
+    problem = build_problem(model, table, fix=FIX)
+    n, b = problem.data["weight"].shape
+    p = problem.space.size
+    rng = np.random.default_rng(5)
+    cl, n_cl, _ = incidence_clusters(problem.data["wi"])
+    weight = np.asarray(problem.data["weight"]).copy()
+    weight[cl == 2] = 0.0  # a cluster without a valid value
+    weight[rng.random(weight.shape) < 0.1] = 0.0
+    ok = (weight > 0).ravel()
+    J = rng.standard_normal((n * b, p)) * ok[:, None]
+    J[:, 2] = 0.5 * J[:, 1]  # specular_reflectance[R] and [G]: one exactly flat direction
+    r = rng.standard_normal(n * b) * ok
+    x = np.array([problem.space.fields[0].spec.lo, 0.5, 0.6, 0.7])  # alpha on its bound: its column is dropped
+    J, r, x = (a.astype(dtype) for a in (J, r, x))
+    data = dict(problem.data, weight=jnp.asarray(weight, dtype))
+    want = jax.jit(lambda x, d, c, J, r: covariances(problem, x, d, c, n_cl, J=J, r=r))(x, data, cl, J, r)
+    got = covariances_host(problem, x, r, J, weight.astype(dtype), cl, n_cl)
+    assert set(got) == set(want)
+    tol = dict(float64=1e-10, float32=2e-4)[dtype]
+    for k in want:
+        w, g = np.asarray(want[k]), np.asarray(got[k])
+        if w.dtype == bool or k in ("m", "g"):
+            np.testing.assert_array_equal(g, w, err_msg=k)
+        else:
+            np.testing.assert_allclose(g, w, rtol=tol, atol=tol * np.max(np.abs(w)), err_msg=k)
+    assert np.all(np.asarray(got["iid"])[0] == 0) and got["flat"][1] and got["flat"][2] and not got["flat"][0]
+    assert int(got["g"]) == n_cl - 1
+
+
+def test_host_cluster_solves_give_nan_for_a_singular_cluster():
+    """The jackknife's per-cluster systems: numpy raises for a singular one, where XLA's LU returns
+    non-finite values (and the CR1 term stands in); the host version must give NaN for that
+    cluster only."""
+    from appearance_jax.fit.solve.uncertainty import _solve_each
+
+    A = np.array([[[2.0, 0.0], [0.0, 4.0]], [[1.0, 0.0], [0.0, 0.0]], [[1.0, 1.0], [0.0, 1.0]]])
+    b = np.array([[2.0, 4.0], [1.0, 1.0], [3.0, 1.0]])
+    got = _solve_each(np, A, b)
+    np.testing.assert_allclose(got[0], [1.0, 1.0])
+    assert np.all(np.isnan(got[1]))
+    np.testing.assert_allclose(got[2], [2.0, 1.0])

@@ -265,12 +265,15 @@ class FitDiverged(ArithmeticError):
 
 
 def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, starts=None, data=None,
-           bootstrap=None, covariances=None) -> FitResult:
+           bootstrap=None, covariances=None, x=None, clusters=None) -> FitResult:
     """Turn a solver's z into a :class:`FitResult` (uncertainties, flags, error metrics).
 
     ``bootstrap``: the summary of :func:`~.uncertainty.bootstrap_summary` (plus ``seed``) or None.
     ``covariances``: the output of :func:`~.uncertainty.covariances` at this optimum when the
     caller already has it (a batch computes every item's in its solve program), else None.
+    ``x``: the physical parameters at z when the caller has them (a fit's solve program returns
+    them), else computed here. ``clusters``: :func:`~.uncertainty.incidence_clusters` of ``data``
+    when the caller has them.
     """
     data = problem.data if data is None else data
     sp = problem.space
@@ -278,13 +281,14 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     # and kept for later fits of the same problem (:mod:`~.reuse`)
     pkey = reuse.problem_key(problem)
     z = np.asarray(z)
-    x = reuse.cached("x_from_z", pkey, lambda: jax.jit(sp.x_from_z), z)(z)
+    if x is None:
+        x = reuse.cached("x_from_z", pkey, lambda: jax.jit(sp.x_from_z), z)(z)
     bad = [lab for lab, v in zip(sp.labels, np.asarray(x, np.float64)) if not np.isfinite(v)]
     if bad:  # a Params cannot hold them (it would raise naming a field as if the user had set it)
         raise FitDiverged(f"the solver diverged after {int(steps)} steps: non-finite {', '.join(bad)} "
                           "(the residuals became NaN or inf); try other starts (n_starts / --starts), "
                           "another metric, or fix the parameters that run away")
-    cl, n_cl, what = unc.incidence_clusters(data["wi"])
+    cl, n_cl, what = unc.incidence_clusters(data["wi"]) if clusters is None else clusters
     out = covariances
     if out is not None and not all(np.isfinite(np.asarray(out[k])).all() for k in ("iid", "hc1", "cr1", "cr3")):
         out = None  # e.g. a column the solver's Jacobian cannot give (uncertainty.at_solution): directly
@@ -300,7 +304,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     exact = np.asarray(out["flat"], bool)
     cov = np.where(exact[:, None] | exact[None, :], np.nan, cov)
     bound, flat = flags(sp, x, raw, [out[method]], exact)
-    params = reuse.cached("params_from_x", pkey, lambda: jax.jit(sp.params_from_x), x)(x)
+    params = sp.params_from_x_host(x)
     w = np.asarray(data["weight"]) > 0
     # compiled: op by op, a coated model's eval would compile dozens of small programs; kept on
     # disk too (a new process then skips tracing the model)

@@ -118,6 +118,19 @@ def solve_with_covariances(problem: Problem, z0, data, cluster, n_clusters: int,
     return (z, loss, steps, ok), unc.covariances(problem, problem.space.x_from_z(z), data, cluster, n_clusters)
 
 
+def solve_with_jacobian(problem: Problem, z0, data, **solve_kw):
+    """:func:`solve_z`, then x(z) and the residuals and their Jacobian in x there (traceable), for
+    :func:`~.uncertainty.covariances_host`. Returns ((z, loss, steps, ok), (x, r, J)). With
+    ``solver="lm"`` r and J are the solver's own at its last point (:func:`~.uncertainty.jacobian_in_x`:
+    the program traces the model's Jacobian once); other solvers' programs take them anew."""
+    (z, loss, steps, ok), rJ = _solve(problem, z0, data, jacobian=True, **solve_kw)
+    if rJ is not None:
+        x, J = unc.jacobian_in_x(problem, z, rJ[1])
+        return (z, loss, steps, ok), (x, rJ[0], J)
+    x = problem.space.x_from_z(z)
+    return (z, loss, steps, ok), (x, problem.residuals_x(x, data), jax.jacfwd(problem.residuals_x)(x, data))
+
+
 def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0,
            loss_tol=None, jacobian=False):
     """((z, loss, steps, ok), (r, J) at z or None): (r, J) only from ``solver="lm"`` with ``jacobian``."""
@@ -152,7 +165,8 @@ def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, ma
     return (z, 0.5 * jnp.sum(r * r), sol.stats["num_steps"], ok), None
 
 
-_OWN = {"_solve": _solve, "solve_with_covariances": solve_with_covariances}
+_OWN = {"_solve": _solve, "solve_with_covariances": solve_with_covariances,
+        "solve_with_jacobian": solve_with_jacobian}
 
 
 def stock_solve(entry) -> bool:
@@ -226,39 +240,41 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
         z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - 1).astype(dt)])
     n_starts = z0.shape[0]
 
-    cl, n_cl, _ = unc.incidence_clusters(problem.data["wi"])
-    cl = jnp.asarray(cl)
-
-    def run(z0s, data, cl):
+    def run(z0s, data):
         # starts one after another (lax.map), not vmapped: a vmapped while loop compiles to a
         # program 2-3x slower to compile (every branch becomes a select over the batch), and
-        # on a CPU batching the starts saves little. Each start's covariances come with it: from
-        # LM's own final Jacobian, so no program of their own traces and compiles the model again
-        return jax.lax.map(lambda z: solve_with_covariances(problem, z, data, cl, n_cl, solver=solver, rtol=rtol,
-                                                            atol=atol, max_steps=max_steps, verbose=verbose,
-                                                            loss_tol=loss_tol), z0s)
+        # on a CPU batching the starts saves little. Each start's residuals and Jacobian come with
+        # it (LM's own final ones, so no program of their own traces and compiles the model again);
+        # the covariances are computed from them on the host (uncertainty.covariances_host)
+        return jax.lax.map(lambda z: solve_with_jacobian(problem, z, data, solver=solver, rtol=rtol, atol=atol,
+                                                         max_steps=max_steps, verbose=verbose, loss_tol=loss_tol),
+                           z0s)
 
     # the compiled solve is kept for later fits of the same problem and shapes (:mod:`~.reuse`)
     pkey = reuse.problem_key(problem)
     n_valid = int((np.asarray(problem.data["weight"]) > 0).sum()) if verbose else None  # printed loss scale
     # _solve itself too: a replaced solver function (a test's monkeypatch) must not get the old program
-    skey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol,
-                                      int(n_cl))
+    skey = None if pkey is None else (pkey, _solve, solver, rtol, atol, max_steps, verbose, n_valid, loss_tol)
     # and on disk for later processes (:mod:`~appearance_jax.core.program_store`), when it is this
     # module's own solve of a registered model and prints nothing (a printer is a host callback)
     dkey = reuse.disk_key(problem) if skey is not None and stock_solve(_solve) and not verbose else None
-    disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, loss_tol, int(n_cl))
+    disk = None if dkey is None else (dkey, solver, rtol, atol, max_steps, loss_tol)
     t0 = time.perf_counter()
     compiled = reuse.cached("solve", skey,
-                            lambda: compile_cache.compile_lowered(jax.jit(run).lower(z0, problem.data, cl)),
-                            z0, problem.data, cl, disk=disk)
+                            lambda: compile_cache.compile_lowered(jax.jit(run).lower(z0, problem.data)),
+                            z0, problem.data, disk=disk)
     t1 = time.perf_counter()
-    (z, loss, steps, ok), cov = jax.block_until_ready(compiled(z0, problem.data, cl))
-    wall = time.perf_counter() - t1
+    (z, loss, steps, ok), (xs, rs, Js) = jax.block_until_ready(compiled(z0, problem.data))
     z = np.asarray(z)  # on the host: indexing a device array is a program of its own
     loss = np.asarray(loss, np.float64)
     loss = np.where(np.isfinite(loss), loss, np.inf)
     best = int(np.argmin(loss))
+    clusters = unc.incidence_clusters(problem.data["wi"])
+    cl, n_cl, _ = clusters
+    x_best = np.asarray(xs)[best]
+    cov = unc.covariances_host(problem, x_best, np.asarray(rs)[best], np.asarray(Js)[best], problem.data["weight"],
+                               cl, n_cl)
+    wall = time.perf_counter() - t1  # the solve and its covariances
     starts = {}
     if n_starts > 1:
         n = problem.space.size
@@ -268,9 +284,9 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     if bootstrap:
         boot = _bootstrap(problem, z[best], bootstrap, bootstrap_seed, solver=solver, rtol=rtol, atol=atol,
                           max_steps=max_steps)
-    cov = {k: np.asarray(v)[best] for k, v in cov.items()}
     res = finish(problem, table, z[best], loss[best], np.asarray(steps)[best], np.asarray(ok)[best], wall,
-                 solver, starts, bootstrap=boot, covariances=cov)
+                 solver, starts, bootstrap=boot, covariances=cov, x=x_best,
+                 clusters=clusters)
     res.compile_time = t1 - t0
     return res
 
@@ -324,4 +340,4 @@ def bootstrap_refits(problem: Problem, zs, n_boot: int, seed: int = 0, *, f=None
     return np.asarray(xs, np.float64), np.asarray(ok)
 
 
-__all__ = ["fit", "solve_z", "bootstrap_refits", "SOLVERS"]
+__all__ = ["fit", "solve_z", "solve_with_jacobian", "solve_with_covariances", "bootstrap_refits", "SOLVERS"]

@@ -39,7 +39,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ...core.params import owner_name, param_specs, ParamSpec, validate
+from ...core.params import owner_name, param_specs, ParamSpec, replace_unchecked, validate
 
 EDGE = 1e-3  # start values are kept this fraction of the range away from a finite bound
 
@@ -183,6 +183,17 @@ class ParamSpace:
             kw[f.name] = jnp.reshape(x[i:i + f.size], f.shape)
             i += f.size
         return self.template.replace(**kw)
+
+    def params_from_x_host(self, x):
+        """:meth:`params_from_x` of a concrete x (numpy slices, then device arrays): compiles
+        nothing, where the traced slices and reshapes would each be an XLA program. Unchecked, as
+        a jitted :meth:`params_from_x` returns it: the transforms keep x in its ranges."""
+        x = np.asarray(x)
+        kw, i = {}, 0
+        for f in self.fields:
+            kw[f.name] = jnp.asarray(np.reshape(x[i:i + f.size], f.shape))
+            i += f.size
+        return replace_unchecked(self.template, **kw)
 
     def x_from_params(self, params) -> np.ndarray:
         return np.concatenate([np.ravel(np.broadcast_to(np.asarray(getattr(params, f.name), np.float64), f.shape))

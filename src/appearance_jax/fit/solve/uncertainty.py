@@ -113,15 +113,16 @@ def incidence_clusters(wi) -> tuple[np.ndarray, int, str]:
     return idx, g, "one per incidence direction"
 
 
-def off_bound(space, x, rel: float = 1e-3):
-    """(p,) bool, traceable: the entry is not within ``rel`` of a finite bound (as
-    :meth:`~appearance_jax.fit.solve.transforms.ParamSpace.at_bound`)."""
+def off_bound(space, x, rel: float = 1e-3, xp=jnp):
+    """(p,) bool: the entry is not within ``rel`` of a finite bound (as
+    :meth:`~appearance_jax.fit.solve.transforms.ParamSpace.at_bound`). Traceable with ``xp=jnp``
+    (the default), numpy with ``xp=np``."""
     specs = [f.spec for f in space.fields for _ in range(f.size)]
-    lo = jnp.array([s.lo for s in specs], x.dtype)
-    hi = jnp.array([s.hi for s in specs], x.dtype)
-    box = jnp.isfinite(lo) & jnp.isfinite(hi)
-    scale = jnp.where(box, hi - lo, jnp.maximum(jnp.abs(x), 1e-12))
-    near = (jnp.isfinite(lo) & (x - lo <= rel * scale)) | (jnp.isfinite(hi) & (hi - x <= rel * scale))
+    lo = xp.asarray([s.lo for s in specs], x.dtype)
+    hi = xp.asarray([s.hi for s in specs], x.dtype)
+    box = xp.isfinite(lo) & xp.isfinite(hi)
+    scale = xp.where(box, hi - lo, xp.maximum(xp.abs(x), 1e-12))
+    near = (xp.isfinite(lo) & (x - lo <= rel * scale)) | (xp.isfinite(hi) & (hi - x <= rel * scale))
     return ~near
 
 
@@ -136,56 +137,117 @@ def covariances(problem, x, data, cluster, n_clusters: int, *, J=None, r=None) -
     component > ``MEMBER`` in an exactly flat direction, ``s2`` the iid residual variance,
     ``m`` valid residuals and ``g`` clusters with a valid residual. ``J`` (m_all, p) and ``r``
     (m_all,): the residuals' Jacobian in x and the residuals at x when the caller has them
-    (:func:`at_solution`), else computed here.
+    (:func:`at_solution`), else computed here. :func:`covariances_host` is the same in numpy.
     """
     if J is None:
         J = jax.jacfwd(problem.residuals_x)(x, data)
     if r is None:
         r = problem.residuals_x(x, data)
-    J = J * off_bound(problem.space, x)[None, :]
-    valid = (data["weight"] > 0).ravel()
-    m = jnp.sum(valid)
+    return _estimates(jnp, J, r, data["weight"], cluster, n_clusters, off_bound(problem.space, x),
+                      problem.absolute_sigma)
+
+
+def covariances_host(problem, x, r, J, weight, cluster, n_clusters: int) -> dict:
+    """:func:`covariances` in numpy, from the residuals ``r`` (m_all,) and their Jacobian ``J``
+    (m_all, p) in x at physical ``x`` (as :func:`jacobian_in_x` gives them), in their dtype.
+
+    Why on the host: a fit's compiled solve then only returns r and J, and XLA does not compile
+    the estimates (their eigendecompositions, cluster sums and per-cluster solves took a quarter
+    of a small fit's compile time; docs/fitting.md). A few milliseconds for a MERL-sized table.
+    """
+    J = np.asarray(J)
+    x = np.asarray(x, J.dtype)
+    return _estimates(np, J, np.asarray(r, J.dtype), np.asarray(weight), np.asarray(cluster), n_clusters,
+                      off_bound(problem.space, x, xp=np), problem.absolute_sigma)
+
+
+def _segment_summer(xp, ids, n: int):
+    """A function summing the rows of an array (m, ...) per segment id ``ids`` (m,) in [0, n):
+    (n, ...). The numpy one sorts the ids once for all the sums it makes."""
+    if xp is jnp:
+        return lambda v: jax.ops.segment_sum(v, ids, num_segments=n)
+    order = np.argsort(ids, kind="stable")
+    first = np.searchsorted(ids[order], np.arange(n))  # each segment's first row in sorted order
+    present = np.bincount(ids, minlength=n) > 0
+
+    def summed(v):
+        out = np.zeros((n,) + v.shape[1:], v.dtype)
+        if present.any():
+            out[present] = np.add.reduceat(v[order], first[present], axis=0)
+        return out
+
+    return summed
+
+
+def _solve_each(xp, A, b):
+    """Solutions of A_g x_g = b_g (G, p, p), (G, p); NaN for a singular A_g (as XLA's LU gives)."""
+    if xp is jnp:
+        return jnp.linalg.solve(A, b[..., None])[..., 0]
+    try:
+        return np.linalg.solve(A, b[..., None])[..., 0]
+    except np.linalg.LinAlgError:  # numpy raises for any singular member: one at a time
+        out = np.full(b.shape, np.nan, b.dtype)
+        for k in range(A.shape[0]):
+            try:
+                out[k] = np.linalg.solve(A[k], b[k])
+            except np.linalg.LinAlgError:
+                pass
+        return out
+
+
+def _estimates(xp, J, r, weight, cluster, n_clusters: int, keep, absolute_sigma: bool) -> dict:
+    """The estimates of :func:`covariances` from J (m_all, p) and r (m_all,) in x, with ``xp`` one
+    of jnp (traceable) and np."""
+    J = J * keep[None, :]
+    valid = (weight > 0).ravel()
+    m = xp.sum(valid)
     p = J.shape[1]
-    d = jnp.linalg.norm(J, axis=0)
-    d = jnp.where(d > 0, d, 1.0)
-    lam, vec = jnp.linalg.eigh((J / d).T @ (J / d))
-    big = jnp.maximum(lam[-1], jnp.finfo(lam.dtype).tiny)
+    d = xp.linalg.norm(J, axis=0)
+    d = xp.where(d > 0, d, 1.0)
+    Jn = J / d
+    lam, vec = xp.linalg.eigh(Jn.T @ Jn)
+    big = xp.maximum(lam[-1], xp.finfo(lam.dtype).tiny)
     ok = lam > numerical_tol(lam.dtype) * big
-    bread = ((vec * jnp.where(ok, 1.0 / jnp.where(ok, lam, 1.0), 0.0)) @ vec.T) / jnp.outer(d, d)
-    dof = jnp.maximum(m - p, 1)
-    s2 = jnp.asarray(1.0, r.dtype) if problem.absolute_sigma else (r @ r) / dof
+    bread = ((vec * xp.where(ok, 1.0 / xp.where(ok, lam, 1.0), 0.0)) @ vec.T) / xp.outer(d, d)
+    dof = xp.maximum(m - p, 1)
+    s2 = xp.asarray(1.0, r.dtype) if absolute_sigma else (r @ r) / dof
     scores = J * r[:, None]  # (m_all, p); masked entries have r = 0 and J = 0
     meat_e = scores.T @ scores * (m / dof)
-    n_bands = data["weight"].shape[-1]
-    entry_cluster = jnp.repeat(jnp.asarray(cluster), n_bands)
-    S = jax.ops.segment_sum(scores, entry_cluster, num_segments=n_clusters)
-    g = jnp.sum(jax.ops.segment_sum(valid.astype(r.dtype), entry_cluster, num_segments=n_clusters) > 0)
-    c = g / jnp.maximum(g - 1, 1) * (m - 1) / dof
+    n_bands = weight.shape[-1]
+    per_cluster = _segment_summer(xp, xp.repeat(xp.asarray(cluster), n_bands), n_clusters)
+    S = per_cluster(scores)
+    g = xp.sum(per_cluster(valid.astype(r.dtype)) > 0)
+    c = g / xp.maximum(g - 1, 1) * (m - 1) / dof
     meat_c = S.T @ S * c
     # CR3: the linearised delete-one-cluster jackknife, x_(-g) - x = (A - A_g)^-1 S_g
     # = (I - B A_g)^-1 B S_g (A = J^T J, A_g its part from cluster g); where deleting g leaves
     # the system singular, the CR1 term B S_g stands in.
-    A_g = jax.ops.segment_sum(J[:, :, None] * J[:, None, :], entry_cluster, num_segments=n_clusters)
+    A_g = per_cluster(J[:, :, None] * J[:, None, :])
     BS = S @ bread.T
-    delta = jnp.linalg.solve(jnp.eye(p, dtype=J.dtype) - bread @ A_g, BS[..., None])[..., 0]
-    delta = jnp.where(jnp.all(jnp.isfinite(delta), axis=-1, keepdims=True), delta, BS)
-    cov_jk = delta.T @ delta * ((g - 1) / jnp.maximum(g, 1))
-    flat = jnp.any((jnp.abs(vec) > MEMBER) & ~ok[None, :], axis=1) & off_bound(problem.space, x)
+    delta = _solve_each(xp, xp.eye(p, dtype=J.dtype) - bread @ A_g, BS)
+    delta = xp.where(xp.all(xp.isfinite(delta), axis=-1, keepdims=True), delta, BS)
+    cov_jk = delta.T @ delta * ((g - 1) / xp.maximum(g, 1))
+    flat = xp.any((xp.abs(vec) > MEMBER) & ~ok[None, :], axis=1) & keep
     return dict(iid=bread * s2, hc1=bread @ meat_e @ bread, cr1=bread @ meat_c @ bread, cr3=cov_jk,
                 lam=lam / big, flat=flat, s2=s2, m=m, g=g)
 
 
-def at_solution(problem, z, data, cluster, n_clusters: int, r, Jz) -> dict:
-    """:func:`covariances` at x = x(z) from a solver's residuals ``r`` and Jacobian ``Jz`` = dr/dz
-    there (:func:`~.lm.levenberg_marquardt` with ``with_jacobian``): no second Jacobian of the
-    model. The transforms act entry by entry (:mod:`~.transforms`), so dr/dx = Jz / (dx/dz)
-    column by column; forward mode scales a column's tangent by dx/dz before propagating it, so
-    the quotient is dr/dx to rounding. A column with dx/dz = 0 (x clipped to a bound) becomes
-    NaN unless :func:`off_bound` drops it anyway: the caller then computes the covariances
-    directly."""
+def jacobian_in_x(problem, z, Jz):
+    """(x, dr/dx) at x = x(z) from a solver's Jacobian ``Jz`` = dr/dz (traceable). The transforms
+    act entry by entry (:mod:`~.transforms`), so dr/dx = Jz / (dx/dz) column by column; forward
+    mode scales a column's tangent by dx/dz before propagating it, so the quotient is dr/dx to
+    rounding. A column with dx/dz = 0 (x clipped to a bound) becomes NaN unless :func:`off_bound`
+    drops it anyway: the caller then computes the covariances directly."""
     x, d = jax.jvp(problem.space.x_from_z, (z,), (jnp.ones_like(z),))
     keep = off_bound(problem.space, x)
-    Jx = jnp.where(d != 0, Jz / jnp.where(d != 0, d, 1.0), jnp.where(keep, jnp.nan, 0.0))
+    return x, jnp.where(d != 0, Jz / jnp.where(d != 0, d, 1.0), jnp.where(keep, jnp.nan, 0.0))
+
+
+def at_solution(problem, z, data, cluster, n_clusters: int, r, Jz) -> dict:
+    """:func:`covariances` at x = x(z) from a solver's residuals ``r`` and Jacobian ``Jz`` = dr/dz
+    there (:func:`~.lm.levenberg_marquardt` with ``with_jacobian``; :func:`jacobian_in_x`): no
+    second Jacobian of the model."""
+    x, Jx = jacobian_in_x(problem, z, Jz)
     return covariances(problem, x, data, cluster, n_clusters, J=Jx, r=r)
 
 
@@ -375,6 +437,6 @@ def bootstrap_summary(xs, ok) -> dict:
     return dict(out, sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T)
 
 
-__all__ = ["covariances", "covariance", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
+__all__ = ["covariances", "covariances_host", "jacobian_in_x", "at_solution", "covariance", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
            "degeneracies", "flat_members", "unresolved", "scales", "bootstrap_weights", "bootstrap_summary",
            "METHODS", "DESCRIPTION", "FLAT_FRACTION"]
