@@ -279,3 +279,23 @@ def test_host_cluster_solves_give_nan_for_a_singular_cluster():
     np.testing.assert_allclose(got[0], [1.0, 1.0])
     assert np.all(np.isnan(got[1]))
     np.testing.assert_allclose(got[2], [2.0, 1.0])
+
+
+def test_host_covariances_of_a_non_finite_jacobian_are_nan():
+    """A NaN or infinite Jacobian entry (a model that blows up at the optimum) gives NaN estimates,
+    not an exception: the result then falls back to the covariances from the model's own Jacobian
+    (result.finish) or reports NaN sigmas, as with the traced estimates."""
+    from appearance_jax.fit.solve.problem import build_problem
+    from appearance_jax.fit.solve.uncertainty import covariances_host
+
+    problem = build_problem(registry.get("rough_conductor"), _table(), fix=FIX)
+    n, b = problem.data["weight"].shape
+    cl, n_cl, _ = incidence_clusters(problem.data["wi"])
+    rng = np.random.default_rng(2)
+    x = np.array([0.2, 0.5, 0.6, 0.7])
+    for bad in (np.nan, np.inf):
+        J = rng.standard_normal((n * b, 4))
+        J[3, 1] = bad
+        out = covariances_host(problem, x, rng.standard_normal(n * b), J, problem.data["weight"], cl, n_cl)
+        for k in ("iid", "hc1", "cr1", "cr3"):
+            assert not np.all(np.isfinite(out[k])), k

@@ -62,7 +62,7 @@ class FitResult:
     loss: float  # mean of squared residuals over valid entries, in the fit metric
     metrics: dict  # rmse, cos_log_rmse, log_rmse, rel_rmse (see residuals.error_metrics)
     iterations: int
-    wall_time: float  # seconds of the solve itself (compilation excluded, see compile_time)
+    wall_time: float  # seconds of the solve and its covariances (compilation excluded, see compile_time)
     converged: bool
     solver: str
     metric: str

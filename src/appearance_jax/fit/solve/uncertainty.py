@@ -157,8 +157,16 @@ def covariances_host(problem, x, r, J, weight, cluster, n_clusters: int) -> dict
     """
     J = np.asarray(J)
     x = np.asarray(x, J.dtype)
-    return _estimates(np, J, np.asarray(r, J.dtype), np.asarray(weight), np.asarray(cluster), n_clusters,
-                      off_bound(problem.space, x, xp=np), problem.absolute_sigma)
+    try:
+        # NaN in, NaN out, silently (as XLA computes the traced estimates): finish() checks the result
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            return _estimates(np, J, np.asarray(r, J.dtype), np.asarray(weight), np.asarray(cluster), n_clusters,
+                              off_bound(problem.space, x, xp=np), problem.absolute_sigma)
+    except np.linalg.LinAlgError:  # e.g. an infinite Jacobian entry: NaN estimates, as the traced ones give
+        p = J.shape[-1]
+        nan = np.full((p, p), np.nan, J.dtype)
+        return dict(iid=nan, hc1=nan, cr1=nan, cr3=nan, lam=np.full(p, np.nan, J.dtype), flat=np.zeros(p, bool),
+                    s2=np.asarray(np.nan, J.dtype), m=int(np.sum(np.asarray(weight) > 0)), g=0)
 
 
 def _segment_summer(xp, ids, n: int):
