@@ -170,21 +170,32 @@ def covariances_host(problem, x, r, J, weight, cluster, n_clusters: int) -> dict
 
 
 def _segment_summer(xp, ids, n: int):
-    """A function summing the rows of an array (m, ...) per segment id ``ids`` (m,) in [0, n):
-    (n, ...). The numpy one sorts the ids once for all the sums it makes."""
+    """Two functions of an array with rows per entry (m, ...), ``ids`` (m,) its segments in
+    [0, n): the sums of the rows per segment (n, ...), and of J (m, p) the per-segment
+    Gram matrices sum_e J_e J_e^T (n, p, p). The numpy ones sort the ids once for both."""
     if xp is jnp:
-        return lambda v: jax.ops.segment_sum(v, ids, num_segments=n)
+        summed = lambda v: jax.ops.segment_sum(v, ids, num_segments=n)  # noqa: E731
+        return summed, lambda J: summed(J[:, :, None] * J[:, None, :])
     order = np.argsort(ids, kind="stable")
-    first = np.searchsorted(ids[order], np.arange(n))  # each segment's first row in sorted order
-    present = np.bincount(ids, minlength=n) > 0
+    bounds = np.searchsorted(ids[order], np.arange(n + 1))  # segment k: sorted rows bounds[k]:bounds[k+1]
+    present = bounds[1:] > bounds[:-1]
 
     def summed(v):
         out = np.zeros((n,) + v.shape[1:], v.dtype)
         if present.any():
-            out[present] = np.add.reduceat(v[order], first[present], axis=0)
+            out[present] = np.add.reduceat(v[order], bounds[:-1][present], axis=0)
         return out
 
-    return summed
+    def gram(J):
+        # one matrix product per segment: the (m, p, p) outer products would be 64 MB on a MERL table
+        Js = J[order]
+        out = np.zeros((n, J.shape[1], J.shape[1]), J.dtype)
+        for k in np.flatnonzero(present):
+            block = Js[bounds[k]:bounds[k + 1]]
+            out[k] = block.T @ block
+        return out
+
+    return summed, gram
 
 
 def _solve_each(xp, A, b):
@@ -222,7 +233,7 @@ def _estimates(xp, J, r, weight, cluster, n_clusters: int, keep, absolute_sigma:
     scores = J * r[:, None]  # (m_all, p); masked entries have r = 0 and J = 0
     meat_e = scores.T @ scores * (m / dof)
     n_bands = weight.shape[-1]
-    per_cluster = _segment_summer(xp, xp.repeat(xp.asarray(cluster), n_bands), n_clusters)
+    per_cluster, gram_per_cluster = _segment_summer(xp, xp.repeat(xp.asarray(cluster), n_bands), n_clusters)
     S = per_cluster(scores)
     g = xp.sum(per_cluster(valid.astype(r.dtype)) > 0)
     c = g / xp.maximum(g - 1, 1) * (m - 1) / dof
@@ -230,7 +241,7 @@ def _estimates(xp, J, r, weight, cluster, n_clusters: int, keep, absolute_sigma:
     # CR3: the linearised delete-one-cluster jackknife, x_(-g) - x = (A - A_g)^-1 S_g
     # = (I - B A_g)^-1 B S_g (A = J^T J, A_g its part from cluster g); where deleting g leaves
     # the system singular, the CR1 term B S_g stands in.
-    A_g = per_cluster(J[:, :, None] * J[:, None, :])
+    A_g = gram_per_cluster(J)
     BS = S @ bread.T
     delta = _solve_each(xp, xp.eye(p, dtype=J.dtype) - bread @ A_g, BS)
     delta = xp.where(xp.all(xp.isfinite(delta), axis=-1, keepdims=True), delta, BS)
