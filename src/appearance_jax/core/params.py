@@ -303,7 +303,8 @@ def _replace(self, **kw):
 
 def replace_unchecked(params, **values):
     """A copy of ``params`` with ``values`` set as given: no conversion and no check, as JAX's
-    pytree rebuilds make them (for tests of the checks at the public boundary, which still
+    pytree rebuilds make them (for values the library computed inside their ranges, e.g. a fit's
+    parameters from its transforms, and for tests of the checks at the public boundary, which still
     run on such an object; :func:`validate`)."""
     cls = type(params)
     unknown = set(values) - set(cls._data_fields) - set(cls._static_fields)

@@ -196,7 +196,7 @@ def _direct_covariances(model, table, x, **build):
 @pytest.mark.parametrize("case", ["interior", "bounds"])
 def test_covariances_from_the_solvers_jacobian_are_the_models(case):
     """fit() and fit_batch() take the covariances from LM's final Jacobian in z, divided by dx/dz
-    (uncertainty.at_solution); they must equal the covariances from the model's Jacobian in x to
+    (uncertainty.jacobian_in_x); they must equal the covariances from the model's Jacobian in x to
     rounding: in the interior (2 starts, the best one's), and with parameters on a bound (their
     columns dropped, the others' intact)."""
     if case == "interior":

@@ -291,7 +291,7 @@ def finish(problem: Problem, table, z, loss_half, steps, ok, wall, solver, start
     cl, n_cl, what = unc.incidence_clusters(data["wi"]) if clusters is None else clusters
     out = covariances
     if out is not None and not all(np.isfinite(np.asarray(out[k])).all() for k in ("iid", "hc1", "cr1", "cr3")):
-        out = None  # e.g. a column the solver's Jacobian cannot give (uncertainty.at_solution): directly
+        out = None  # e.g. a column the solver's Jacobian cannot give (uncertainty.jacobian_in_x): directly
     if out is None:
         cl = np.asarray(cl)
         cov_fn = reuse.cached("covariances", None if pkey is None else (pkey, n_cl),

@@ -107,17 +107,6 @@ def solve_z(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, m
                   loss_tol=loss_tol)[0]
 
 
-def solve_with_covariances(problem: Problem, z0, data, cluster, n_clusters: int, **solve_kw):
-    """:func:`solve_z`, then the covariances at its z (:func:`~.uncertainty.covariances`; traceable).
-    Returns ((z, loss, steps, ok), covariances). With ``solver="lm"`` from the solver's own final
-    residuals and Jacobian (:func:`~.uncertainty.at_solution`): the program traces the model's
-    Jacobian once."""
-    (z, loss, steps, ok), rJ = _solve(problem, z0, data, jacobian=True, **solve_kw)
-    if rJ is not None:
-        return (z, loss, steps, ok), unc.at_solution(problem, z, data, cluster, n_clusters, *rJ)
-    return (z, loss, steps, ok), unc.covariances(problem, problem.space.x_from_z(z), data, cluster, n_clusters)
-
-
 def solve_with_jacobian(problem: Problem, z0, data, **solve_kw):
     """:func:`solve_z`, then x(z) and the residuals and their Jacobian in x there (traceable), for
     :func:`~.uncertainty.covariances_host`. Returns ((z, loss, steps, ok), (x, r, J)). With
@@ -129,6 +118,13 @@ def solve_with_jacobian(problem: Problem, z0, data, **solve_kw):
         return (z, loss, steps, ok), (x, rJ[0], J)
     x = problem.space.x_from_z(z)
     return (z, loss, steps, ok), (x, problem.residuals_x(x, data), jax.jacfwd(problem.residuals_x)(x, data))
+
+
+def solve_with_covariances(problem: Problem, z0, data, cluster, n_clusters: int, **solve_kw):
+    """:func:`solve_with_jacobian`, then the covariances from its r and J (:func:`~.uncertainty.covariances`;
+    traceable, for a batch's program). Returns ((z, loss, steps, ok), covariances)."""
+    out, (x, r, J) = solve_with_jacobian(problem, z0, data, **solve_kw)
+    return out, unc.covariances(problem, x, data, cluster, n_clusters, J=J, r=r)
 
 
 def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, max_steps=400, verbose=0,
@@ -165,8 +161,7 @@ def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, ma
     return (z, 0.5 * jnp.sum(r * r), sol.stats["num_steps"], ok), None
 
 
-_OWN = {"_solve": _solve, "solve_with_covariances": solve_with_covariances,
-        "solve_with_jacobian": solve_with_jacobian}
+_OWN = {"_solve": _solve, "solve_with_covariances": solve_with_covariances}
 
 
 def stock_solve(entry) -> bool:

@@ -177,22 +177,22 @@ class ParamSpace:
     def x_start(self) -> np.ndarray:
         return np.concatenate([np.ravel(self.start[f.name]) for f in self.fields])
 
-    def params_from_x(self, x):
+    def _split(self, x, reshape):
+        """{field name: its entries of the flat vector x, reshaped by ``reshape(part, shape)``}."""
         kw, i = {}, 0
         for f in self.fields:
-            kw[f.name] = jnp.reshape(x[i:i + f.size], f.shape)
+            kw[f.name] = reshape(x[i:i + f.size], f.shape)
             i += f.size
-        return self.template.replace(**kw)
+        return kw
+
+    def params_from_x(self, x):
+        return self.template.replace(**self._split(x, jnp.reshape))
 
     def params_from_x_host(self, x):
         """:meth:`params_from_x` of a concrete x (numpy slices, then device arrays): compiles
         nothing, where the traced slices and reshapes would each be an XLA program. Unchecked, as
         a jitted :meth:`params_from_x` returns it: the transforms keep x in its ranges."""
-        x = np.asarray(x)
-        kw, i = {}, 0
-        for f in self.fields:
-            kw[f.name] = jnp.asarray(np.reshape(x[i:i + f.size], f.shape))
-            i += f.size
+        kw = self._split(np.asarray(x), lambda part, shape: jnp.asarray(np.reshape(part, shape)))
         return replace_unchecked(self.template, **kw)
 
     def x_from_params(self, params) -> np.ndarray:

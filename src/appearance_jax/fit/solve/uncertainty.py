@@ -137,7 +137,7 @@ def covariances(problem, x, data, cluster, n_clusters: int, *, J=None, r=None) -
     component > ``MEMBER`` in an exactly flat direction, ``s2`` the iid residual variance,
     ``m`` valid residuals and ``g`` clusters with a valid residual. ``J`` (m_all, p) and ``r``
     (m_all,): the residuals' Jacobian in x and the residuals at x when the caller has them
-    (:func:`at_solution`), else computed here. :func:`covariances_host` is the same in numpy.
+    (:func:`jacobian_in_x`), else computed here. :func:`covariances_host` is the same in numpy.
     """
     if J is None:
         J = jax.jacfwd(problem.residuals_x)(x, data)
@@ -260,14 +260,6 @@ def jacobian_in_x(problem, z, Jz):
     x, d = jax.jvp(problem.space.x_from_z, (z,), (jnp.ones_like(z),))
     keep = off_bound(problem.space, x)
     return x, jnp.where(d != 0, Jz / jnp.where(d != 0, d, 1.0), jnp.where(keep, jnp.nan, 0.0))
-
-
-def at_solution(problem, z, data, cluster, n_clusters: int, r, Jz) -> dict:
-    """:func:`covariances` at x = x(z) from a solver's residuals ``r`` and Jacobian ``Jz`` = dr/dz
-    there (:func:`~.lm.levenberg_marquardt` with ``with_jacobian``; :func:`jacobian_in_x`): no
-    second Jacobian of the model."""
-    x, Jx = jacobian_in_x(problem, z, Jz)
-    return covariances(problem, x, data, cluster, n_clusters, J=Jx, r=r)
 
 
 def covariance(problem, x, data):
@@ -456,6 +448,6 @@ def bootstrap_summary(xs, ok) -> dict:
     return dict(out, sigma=xg.std(axis=0, ddof=1), interval68=q[:2].T, interval95=q[2:].T)
 
 
-__all__ = ["covariances", "covariances_host", "jacobian_in_x", "at_solution", "covariance", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
+__all__ = ["covariances", "covariances_host", "jacobian_in_x", "covariance", "incidence_clusters", "default_method", "default_sigma", "min_clusters",
            "degeneracies", "flat_members", "unresolved", "scales", "bootstrap_weights", "bootstrap_summary",
            "METHODS", "DESCRIPTION", "FLAT_FRACTION"]
