@@ -103,6 +103,7 @@ def run(name: str):
               loss=0.5 * res.loss * res.n_valid, x=res.x, total=total, again=min(again))
 
     prob = build_problem(model, table, init=start, fix=fix, metric=metric)
+    prob.data = jax.device_put(prob.data)  # on the device once: Powell's calls move only x
     sp = prob.space
     loss_fn = jax.jit(lambda x, d: 0.5 * jnp.sum(prob.residuals_x(x, d) ** 2))
     x0 = sp.x_start()

@@ -123,6 +123,7 @@ def identifiability(name, table, *, free=FREE, settings=None, progress=print):
 
     truth = _truth(name, settings)
     prob = build_problem(co.MODEL, table, init=truth, fix=_fix(free))
+    prob.data = jax.device_put(prob.data)  # on the device once (build_problem's are numpy)
     fn = jax.jit(lambda x, d: (prob.residuals_x(x, d), jax.jacfwd(prob.residuals_x)(x, d)))
 
     def jac(x):

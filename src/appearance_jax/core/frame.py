@@ -60,10 +60,11 @@ def same_hemisphere(a: Vec3, b: Vec3):
     return a.z * b.z > 0
 
 
-def spherical_direction(theta, phi) -> Vec3:
-    """Unit vector with polar angle ``theta`` from +z and azimuth ``phi`` from +x (radians)."""
-    st = jnp.sin(theta)
-    return Vec3(st * jnp.cos(phi), st * jnp.sin(phi), jnp.cos(theta))
+def spherical_direction(theta, phi, xp=jnp) -> Vec3:
+    """Unit vector with polar angle ``theta`` from +z and azimuth ``phi`` from +x (radians);
+    ``xp=np`` computes it in numpy (on the host, no XLA program)."""
+    st = xp.sin(theta)
+    return Vec3(st * xp.cos(phi), st * xp.sin(phi), xp.cos(theta))
 
 
 @jax.jit

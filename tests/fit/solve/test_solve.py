@@ -167,6 +167,19 @@ def test_masked_and_grazing_samples_are_counted_not_used():
     np.testing.assert_allclose(res.x, 0.5, rtol=1e-8)
 
 
+def test_problem_data_are_host_arrays_of_the_tables_directions():
+    """build_problem keeps the data in numpy (the compiled solve moves them itself) in JAX's default
+    float dtype, with the directions of Table.directions to rounding."""
+    from appearance_jax.fit.solve import build_problem
+
+    t = gonio_table()
+    prob = build_problem("lambert", t)
+    leaves = jax.tree_util.tree_leaves(prob.data)
+    assert len(leaves) == 10 and all(type(v) is np.ndarray and v.dtype == jnp.result_type(float) for v in leaves)
+    for host, dev in zip(prob.data["wi"] + prob.data["wo"], t.directions()[0] + t.directions()[1]):
+        np.testing.assert_allclose(host, np.asarray(dev), rtol=0, atol=4 * np.finfo(host.dtype).eps)
+
+
 def test_bad_requests_raise_clear_errors():
     model = registry.get("lambert")
     t = in_plane_table().replace(values=np.full((210, 3), 0.1))

@@ -65,6 +65,23 @@ def test_clusters_are_incidence_directions():
     assert what.startswith("theta_i bins") and g <= 28 and g < 200
 
 
+def test_clusters_order_rows_like_unique_rows():
+    """The packed one-key clustering numbers clusters as np.unique over rounded (x, y, z) rows does
+    (lexicographic), including negative components, the poles and directions 1e-7 apart (one cluster)."""
+    from appearance_jax.core.vec import Vec3
+
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(40, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+    v[:6] = [(0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, -1, 0), (0, 1, 0)]
+    rows = v[rng.integers(0, 40, 300)]
+    rows[::7] += 1e-7  # rounds to the same 1e-6 grid point as its twin, or to a neighbour: either way as unique rows
+    cl, g, what = incidence_clusters(Vec3(*rows.T))
+    _, ref = np.unique(np.round(rows / 1e-6).astype(np.int64), axis=0, return_inverse=True)
+    assert what == "one per incidence direction" and g == ref.max() + 1
+    np.testing.assert_array_equal(cl, ref.ravel())
+
+
 def test_honest_sigma_covers_the_truth_and_iid_does_not():
     """K = 64 realisations in one fit_batch: pooled 1-sigma coverage of the 4 parameters.
 

@@ -227,12 +227,13 @@ def fit(model, table: Table, *, init=None, fix=None, metric: str = "l2", weights
     problem = build_problem(model, table, init=init, fix=fix, metric=metric, weights=weights,
                             max_theta_deg=max_theta_deg, use_sigma=use_sigma, key=key, model_kwargs=model_kwargs)
     sp = problem.space
-    dt = jnp.result_type(float)
-    # the given starts (the first is the problem's own), then n_starts - 1 random ones
+    dt = np.dtype(jnp.result_type(float))
+    # the given starts (the first is the problem's own), then n_starts - 1 random ones; numpy, like
+    # the problem's data (build_problem): the compiled solve moves its arguments in one call
     xs = [sp.x_start()] + [sp.x_from_params(start_params(problem.model, p)) for p in inits[1:]]
-    z0 = jnp.asarray(np.stack([sp.z_from_x(x) for x in xs]), dt)
+    z0 = np.stack([sp.z_from_x(x) for x in xs]).astype(dt)
     if n_starts > 1:
-        z0 = jnp.concatenate([z0, sp.random_z(jax.random.PRNGKey(seed), n_starts - 1).astype(dt)])
+        z0 = np.concatenate([z0, np.asarray(sp.random_z(jax.random.PRNGKey(seed), n_starts - 1), dt)])
     n_starts = z0.shape[0]
 
     def run(z0s, data):

@@ -102,7 +102,10 @@ def incidence_clusters(wi) -> tuple[np.ndarray, int, str]:
     theta_i in bins of ``THETA_BIN_DEG`` degrees instead.
     """
     xyz = np.stack([np.asarray(getattr(wi, c), np.float64) for c in "xyz"], axis=-1)
-    _, idx = np.unique(np.round(xyz / 1e-6).astype(np.int64), axis=0, return_inverse=True)
+    # the three rounded components (|.| <= 1e6 < 2^20) packed into one int64 in their order, so that a
+    # 1-D unique (several times faster than unique rows) gives the same lexicographic cluster order
+    q = np.round(xyz / 1e-6).astype(np.int64) + (1 << 20)
+    _, idx = np.unique((q[:, 0] << 42) | (q[:, 1] << 21) | q[:, 2], return_inverse=True)
     idx = idx.ravel()
     n = xyz.shape[0]
     g = int(idx.max()) + 1 if n else 0

@@ -188,13 +188,18 @@ class Table:
         return signed if strict else np.where(self.in_plane_rows(), signed, np.nan)
 
     # ------------------------------------------------------------------ geometry / units
-    def directions(self, dtype=None):
-        """(wi, wo) as :class:`~appearance_jax.core.vec.Vec3` arrays of shape (N,)."""
+    def directions(self, dtype=None, host: bool = False):
+        """(wi, wo) as :class:`~appearance_jax.core.vec.Vec3` arrays of shape (N,): device arrays,
+        or numpy arrays with ``host=True`` (computed in float64, then cast to ``dtype``)."""
         import jax.numpy as jnp
 
-        from ...core.frame import spherical_directions
+        from ...core.frame import spherical_direction, spherical_directions
+        from ...core.vec import Vec3
 
         dt = dtype or jnp.result_type(float)
+        if host:
+            return tuple(Vec3(*(np.asarray(c, dt) for c in spherical_direction(t, p, xp=np)))
+                         for t, p in ((self.theta_i, self.phi_i), (self.theta_o, self.phi_o)))
         return spherical_directions(*(np.asarray(a, dt) for a in (self.theta_i, self.phi_i, self.theta_o, self.phi_o)))
 
     def brdf_factor(self) -> np.ndarray:
