@@ -79,6 +79,17 @@ def test_two_conductor_lobes_have_their_own_parameters():
     _close(m.pdf(p, WI, WO), p0 * rough_conductor.pdf(a, WI, WO) + p1 * rough_conductor.pdf(b, WI, WO))
 
 
+def test_jacobian_apart_fields_carry_their_composite_names():
+    """Each component's Model.jacobian_apart reaches the sum under the field's composite name (a
+    colliding field is prefixed); a name that is not a field of the Params is refused eagerly."""
+    assert registry.get("rough_conductor+rough_conductor").jacobian_apart == (
+        "specular_reflectance", "rough_conductor_1_specular_reflectance")
+    assert registry.get("rough_plastic+lambert").jacobian_apart == (
+        "diffuse_reflectance", "specular_reflectance", "reflectance")
+    with pytest.raises(ValueError, match=r"jacobian_apart names \['albedo'\].*reflectance"):
+        dataclasses.replace(lambert.MODEL, jacobian_apart=("albedo",))
+
+
 def test_fixing_values_reproduces_each_component():
     rc_only = CL.Params(**RC_KW, reflectance=0.0)
     lam_only = CL.Params(**{**RC_KW, "specular_reflectance": 0.0}, reflectance=0.8)

@@ -191,5 +191,6 @@ MODEL = Model(
     source="Belcour & Barla 2017; Padrón Griffé 2025 Fig. 3.6(c)",
     reciprocal=True,
     fit_fixed={"eta_outside": (1.0, "the incidence medium is air")},
+    jacobian_apart=("specular_reflectance",),  # scales the finished lobe: its tangents skip the film
     presets=PRESETS,
 )

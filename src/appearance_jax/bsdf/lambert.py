@@ -67,4 +67,5 @@ MODEL = Model(
     summary="ideal diffuse reflector f = rho / pi",
     source="Lambert (1760); background model in all three theses",
     reciprocal=True,
+    jacobian_apart=("reflectance",),  # next to another lobe in a sum (alone it is the only field)
 )

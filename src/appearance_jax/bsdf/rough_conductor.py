@@ -106,6 +106,7 @@ MODEL = Model(
     summary="Cook-Torrance rough conductor (GGX/Beckmann, Smith G, conductor Fresnel)",
     source="Cook & Torrance 1982; Walter et al. 2007; Heitz 2014, 2018",
     reciprocal=True,
+    jacobian_apart=("specular_reflectance",),  # scales the finished lobe: its tangents skip D and G2
     presets={
         "gold": Params(),
         "gold_rough_beckmann": Params(alpha=0.3, distribution="beckmann"),

@@ -248,6 +248,8 @@ MODEL = Model(
     reciprocal=True,
     # a free coat index trades against specular_reflectance and the base albedo (fabrics drift to 2.1-2.5)
     fit_fixed={"eta": (1.5, "coat index of common polymers and varnishes, 1.45-1.6")},
+    # the base albedo and the lobe scale multiply finished terms: their tangents skip the coat tables
+    jacobian_apart=("diffuse_reflectance", "specular_reflectance"),
     presets={
         "white_plastic": Params(),
         "mitsuba_default": Params(

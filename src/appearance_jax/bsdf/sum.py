@@ -325,6 +325,9 @@ def sum_model(*components: Model, name: str | None = None, presets: Mapping[str,
         reciprocal=all(m.reciprocal for m in models),
         transmissive=any(m.transmissive for m in models),
         presets=dict(presets or {}),
+        # each component's own, under their composite names (no other component reads them)
+        jacobian_apart=tuple(s for m, pairs in zip(models, Params.field_map) for s, c in pairs
+                             if c in m.jacobian_apart),
     )
 
 

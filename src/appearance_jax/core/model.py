@@ -33,6 +33,7 @@ Under ``jit``, :func:`~appearance_jax.core.params.checked` /
 from __future__ import annotations
 
 import collections.abc
+import dataclasses
 import functools
 import inspect
 from dataclasses import dataclass, field
@@ -148,7 +149,17 @@ class Model:
     # name -> (value, reason), e.g. {"eta": (1.5, "coat index of common polymers")}; only where
     # physics (not the data) fixes the value, or the field is degenerate with another
     fit_fixed: Mapping[str, tuple[Any, str]] = field(default_factory=dict)
+    # fields that enter f only after the model's costly per-parameter work (band albedos and scales
+    # applied to finished lobes): a fit takes their Jacobian columns in a forward pass of their own,
+    # whose tangents then skip that work (fit.solve.problem.Problem.jacobian_z). A speed hint only:
+    # the Jacobian is the same either way
+    jacobian_apart: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.kind not in ("bsdf", "phase", "bcsdf"):
             raise ValueError(f"Model.kind = {self.kind!r}: must be 'bsdf', 'phase' or 'bcsdf'")
+        names = {f.name for f in dataclasses.fields(self.Params)} if dataclasses.is_dataclass(self.Params) else None
+        unknown = [n for n in self.jacobian_apart if names is not None and n not in names]
+        if unknown:
+            raise ValueError(f"Model {self.name!r}: jacobian_apart names {unknown}, which are not fields of its "
+                             f"Params ({', '.join(sorted(names))})")

@@ -180,6 +180,23 @@ def test_problem_data_are_host_arrays_of_the_tables_directions():
         np.testing.assert_allclose(host, np.asarray(dev), rtol=0, atol=4 * np.finfo(host.dtype).eps)
 
 
+@pytest.mark.parametrize("model, fix", [("rough_plastic", ["eta"]), ("rough_conductor+lambert", ["eta", "k"]),
+                                        ("rough_plastic", ["eta", "alpha"])])
+def test_jacobian_with_fields_apart_is_the_whole_jacobian(model, fix):
+    """Problem.jacobian_z (the fields of Model.jacobian_apart in a forward pass of their own, the
+    others in another) gives jax.jacfwd's Jacobian, columns in z's order; with only apart fields
+    free it is jacfwd itself. At a point off the start, where no column vanishes."""
+    from appearance_jax.fit.solve import build_problem
+
+    m = registry.get(model)
+    prob = build_problem(m, in_plane_table(), fix=fix)
+    z = jnp.asarray(prob.space.z_from_x(prob.space.x_start())) + jnp.linspace(0.1, 0.3, prob.space.size)
+    ref = jax.jit(jax.jacfwd(prob.residuals_z))(z, prob.data)
+    J = jax.jit(prob.jacobian_z)(z, prob.data)
+    assert J.shape == ref.shape and np.all(np.abs(np.asarray(ref)).max(axis=0) > 0)
+    np.testing.assert_allclose(np.asarray(J), np.asarray(ref), rtol=1e-12, atol=1e-12 * float(jnp.max(jnp.abs(ref))))
+
+
 def test_bad_requests_raise_clear_errors():
     model = registry.get("lambert")
     t = in_plane_table().replace(values=np.full((210, 3), 0.1))

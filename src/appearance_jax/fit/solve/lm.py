@@ -47,7 +47,7 @@ LAMBDA_MAX = 1e16
 
 def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10, max_steps: int = 400,
                         loss_tol: float | None = None, progress=None, with_jacobian: bool = False,
-                        n_residuals: int | None = None):
+                        n_residuals: int | None = None, jacobian=None):
     """Minimise 1/2 |fn(z, data)|^2 from ``z0`` (p,). Returns ``(z, loss, steps, converged)``
     (loss = 1/2 |r|^2 at z; steps = iterations taken; converged a bool array). ``loss_tol``:
     also converged when the Gauss-Newton decrement 1/2 gᵀ(JᵀJ)⁻¹g at the current point (the
@@ -58,10 +58,11 @@ def levenberg_marquardt(fn, z0, data, *, rtol: float = 1e-8, atol: float = 1e-10
     was accepted the loop runs one more pass that only takes the Jacobian there (the same traced
     Jacobian, so the program holds one copy of it; the uncertainties at the optimum need no
     program of their own). ``n_residuals``: the length of r when the caller knows it (else it
-    is found by tracing ``fn`` once more)."""
+    is found by tracing ``fn`` once more). ``jacobian``: a function ``(z, data) -> dr/dz`` to use
+    instead of ``jax.jacfwd(fn)`` (a fit's :meth:`~.problem.Problem.jacobian_z`)."""
     z0 = jnp.asarray(z0)
     dt = z0.dtype
-    jac = jax.jacfwd(fn)
+    jac = jax.jacfwd(fn) if jacobian is None else jacobian
 
     # r(z0) is not evaluated here but by a first pass of the loop (``start``), as a trial point
     # with a zero step: the model's forward pass is then traced and compiled once, in the loop

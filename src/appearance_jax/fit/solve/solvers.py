@@ -135,7 +135,8 @@ def _solve(problem: Problem, z0, data, *, solver="lm", rtol=1e-8, atol=1e-10, ma
         n_valid = int(np.sum(np.asarray(problem.data["weight"]) > 0))
         out = levenberg_marquardt(fn, z0, data, rtol=rtol, atol=atol, max_steps=max_steps, loss_tol=loss_tol,
                                   progress=_progress_host(verbose, n_valid) if verbose else None,
-                                  with_jacobian=jacobian, n_residuals=int(data["weight"].size))
+                                  with_jacobian=jacobian, n_residuals=int(data["weight"].size),
+                                  jacobian=problem.jacobian_z)
         z, loss, steps, ok = out[:4]
         return (z, loss, steps, ok & jnp.all(jnp.isfinite(z))), (out[4:] if jacobian else None)
     if solver == "jaxopt_lm":

@@ -218,6 +218,17 @@ class ParamSpace:
     def params_from_z(self, z):
         return self.params_from_x(self.x_from_z(z))
 
+    def z_parts(self, z) -> list:
+        """z split into one array per free field (the order of :attr:`fields`)."""
+        return list(self._split(z, lambda part, shape: part).values())
+
+    def params_from_z_parts(self, parts):
+        """:meth:`params_from_z` of z given as :meth:`z_parts`, the same values; no field's value
+        depends on another field's part (no concatenation), so a derivative taken with respect to
+        some parts carries no tangent, not even zeros, into the fields of the others."""
+        return self.template.replace(**{f.name: jnp.reshape(_forward(f.spec, part), f.shape)
+                                        for f, part in zip(self.fields, parts)})
+
     def random_z(self, key, n: int) -> jax.Array:
         """``n`` random starts in z: uniform over the middle 90 % of box ranges, start * e^N(0,1) otherwise."""
         z0 = jnp.asarray(self.z_from_x(self.x_start()))
