@@ -175,4 +175,5 @@ MODEL = Model(
     presets=PRESETS,
     fit_fixed={"thickness": (16.0, "the thesis' fitted layers are optically thick (t = 16 mfp [T:774])"),
                "eta": (1.0, "index-matched cosmetic layers [T:618, 653]")},
+    band_separable=True,
 )

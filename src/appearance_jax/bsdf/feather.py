@@ -460,4 +460,5 @@ MODEL = Model(
     transmissive=True,
     presets=PRESETS,
     stochastic=True,
+    band_separable=True,
 )

@@ -192,5 +192,6 @@ MODEL = Model(
     reciprocal=True,
     fit_fixed={"eta_outside": (1.0, "the incidence medium is air")},
     jacobian_apart=("specular_reflectance",),  # scales the finished lobe: its tangents skip the film
+    band_separable=True,
     presets=PRESETS,
 )

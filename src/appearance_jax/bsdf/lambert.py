@@ -68,4 +68,5 @@ MODEL = Model(
     source="Lambert (1760); background model in all three theses",
     reciprocal=True,
     jacobian_apart=("reflectance",),  # next to another lobe in a sum (alone it is the only field)
+    band_separable=True,
 )

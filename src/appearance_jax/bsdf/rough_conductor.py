@@ -107,6 +107,7 @@ MODEL = Model(
     source="Cook & Torrance 1982; Walter et al. 2007; Heitz 2014, 2018",
     reciprocal=True,
     jacobian_apart=("specular_reflectance",),  # scales the finished lobe: its tangents skip D and G2
+    band_separable=True,
     presets={
         "gold": Params(),
         "gold_rough_beckmann": Params(alpha=0.3, distribution="beckmann"),

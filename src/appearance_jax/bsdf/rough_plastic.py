@@ -250,6 +250,7 @@ MODEL = Model(
     fit_fixed={"eta": (1.5, "coat index of common polymers and varnishes, 1.45-1.6")},
     # the base albedo and the lobe scale multiply finished terms: their tangents skip the coat tables
     jacobian_apart=("diffuse_reflectance", "specular_reflectance"),
+    band_separable=True,
     presets={
         "white_plastic": Params(),
         "mitsuba_default": Params(

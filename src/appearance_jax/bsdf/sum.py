@@ -328,6 +328,7 @@ def sum_model(*components: Model, name: str | None = None, presets: Mapping[str,
         # each component's own, under their composite names (no other component reads them)
         jacobian_apart=tuple(s for m, pairs in zip(models, Params.field_map) for s, c in pairs
                              if c in m.jacobian_apart),
+        band_separable=all(m.band_separable for m in models),
     )
 
 

@@ -154,6 +154,11 @@ class Model:
     # whose tangents then skip that work (fit.solve.problem.Problem.jacobian_z). A speed hint only:
     # the Jacobian is the same either way
     jacobian_apart: tuple[str, ...] = ()
+    # True when output band b depends on a band field with one entry per output band only through its
+    # entry b (the bands are never mixed): a fit then takes all of such a field's Jacobian columns from
+    # one tangent (fit.solve.problem.Problem.jacobian_z); checked for every model that declares it
+    # (tests/fit/solve/test_solve.py)
+    band_separable: bool = False
 
     def __post_init__(self):
         if self.kind not in ("bsdf", "phase", "bcsdf"):

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 
 from appearance_jax import registry
 from appearance_jax.core.model import Model, boundary
+from appearance_jax.core.vec import Vec3
 from appearance_jax.fit.tables.grids import gonio_angles, in_plane_angles
 from appearance_jax.fit.solve import SOLVERS, fit
 from appearance_jax.fit.tables.table import Table
@@ -181,11 +182,14 @@ def test_problem_data_are_host_arrays_of_the_tables_directions():
 
 
 @pytest.mark.parametrize("model, fix", [("rough_plastic", ["eta"]), ("rough_conductor+lambert", ["eta", "k"]),
-                                        ("rough_plastic", ["eta", "alpha"])])
+                                        ("rough_plastic", ["eta", "alpha"]),
+                                        ("rough_conductor", ["specular_reflectance"])])
 def test_jacobian_with_fields_apart_is_the_whole_jacobian(model, fix):
     """Problem.jacobian_z (the fields of Model.jacobian_apart in a forward pass of their own, the
-    others in another) gives jax.jacfwd's Jacobian, columns in z's order; with only apart fields
-    free it is jacfwd itself. At a point off the start, where no column vanishes."""
+    others in another; the band fields of a band-separable model one tangent each) gives
+    jax.jacfwd's Jacobian, columns in z's order: two passes with collapsed band fields, one pass
+    with them (eta, k of rough_conductor), and only apart fields free. At a point off the start,
+    where no column vanishes."""
     from appearance_jax.fit.solve import build_problem
 
     m = registry.get(model)
@@ -195,6 +199,77 @@ def test_jacobian_with_fields_apart_is_the_whole_jacobian(model, fix):
     J = jax.jit(prob.jacobian_z)(z, prob.data)
     assert J.shape == ref.shape and np.all(np.abs(np.asarray(ref)).max(axis=0) > 0)
     np.testing.assert_allclose(np.asarray(J), np.asarray(ref), rtol=1e-12, atol=1e-12 * float(jnp.max(jnp.abs(ref))))
+
+
+def _separable_models():
+    names = [n for n in registry.names() if registry.get(n).kind == "bsdf" and registry.get(n).band_separable]
+    return names
+
+
+# cheaper static settings where they do not touch the band structure (compile time)
+_CHEAP = {"cosmetics_ordinates": dict(n_nodes=8, n_modes=6, tilt_correction=False, thickness=1.0),
+          "feather": dict(n_h=1, n_lobes=3, max_events=4),
+          "cloth_weave": dict(n_rotations=1, n_samples=4), "snake": dict(n_nodes=8)}
+
+
+def _band_mixing(m, p):
+    """What breaks Model.band_separable for ``m`` at ``p``: changing entry b of a band field must change
+    output band b and leave the other bands bit for bit unchanged. A list of messages (empty: none)."""
+    from appearance_jax.core.params import ParamSpec, param_specs
+
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=(2, 64, 3))
+    v[..., 2] = np.abs(v[..., 2]) + 0.05
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    wi, wo = (Vec3(*(jnp.asarray(v[k, :, c]) for c in range(3))) for k in range(2))
+    kw = dict(key=jax.random.PRNGKey(0)) if m.stochastic else {}
+
+    def f(q):
+        out = m.eval(q, wi, wo, **kw)
+        return np.asarray(out[0] if m.stochastic else out)
+
+    specs = param_specs(type(p))
+    fields = [k for k, s in specs.items() if isinstance(s, ParamSpec) and s.bands]
+    assert fields
+    out = []
+    for k in fields:
+        lo, hi = specs[k].lo, specs[k].hi
+        val = np.broadcast_to(np.asarray(getattr(p, k), np.float64), (3,)) * np.array([0.9, 0.8, 0.7]) + 0.05
+        val = np.clip(val, lo if np.isfinite(lo) else -np.inf, hi if np.isfinite(hi) else np.inf)
+        f0 = f(p.replace(**{k: tuple(val)}))
+        for b in range(3):
+            moved = val.copy()
+            moved[b] = 0.8 * moved[b] + 0.01
+            f1 = f(p.replace(**{k: tuple(moved)}))
+            other = [c for c in range(3) if c != b]
+            if not np.array_equal(f1[..., other], f0[..., other]):
+                out.append(f"{m.name}.{k}[{b}] moves bands {other}")
+            if np.array_equal(f1[..., b], f0[..., b]):
+                out.append(f"{m.name}.{k}[{b}] does not act on band {b}")
+    return out
+
+
+@pytest.mark.parametrize("name", _separable_models())
+def test_band_separable_models_never_mix_bands(name):
+    """Every model that declares Model.band_separable (what lets a fit collapse a band field's tangents)
+    passes the check of _band_mixing."""
+    m = registry.get(name)
+    p = m.Params()
+    assert _band_mixing(m, p.replace(**{k: v for k, v in _CHEAP.get(name, {}).items() if hasattr(p, k)})) == []
+
+
+def test_band_mixing_check_finds_a_model_that_mixes_bands():
+    """The check itself: a Lambertian whose albedo is the band mean in every band fails it."""
+    from appearance_jax.bsdf import lambert
+
+    def mixed(p, wi, wo):
+        rho = jnp.broadcast_to(jnp.asarray(p.reflectance), (3,))
+        return lambert.eval.kernel(p.replace(reflectance=0.5 * rho + 0.5 * jnp.mean(rho)), wi, wo)
+
+    m = Model(name="mixed_lambert", kind="bsdf", Params=lambert.Params, eval=boundary(mixed, lambert.Params),
+              sample=None, pdf=None, summary="", source="", band_separable=True)
+    problems = _band_mixing(m, lambert.Params())
+    assert len(problems) == 3 and all("moves bands" in t for t in problems)
 
 
 def test_bad_requests_raise_clear_errors():

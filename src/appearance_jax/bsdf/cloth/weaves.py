@@ -113,4 +113,5 @@ MODEL = Model(
     summary="Sadeghi's cloth with a plain/satin/twill weave scaled by one angle, orientation-averaged",
     source="Sadeghi 2011 Ch. 5 and App. E (weave shapes), this library (families, averaging)",
     reciprocal=False,
+    band_separable=True,
 )

@@ -251,6 +251,7 @@ MODEL = Model(
                "eta1": (1.56, "the film is keratin (Padrón Sec. 3.5.2; Table 3.1 prints 1.53)"),
                "depth": (2.0, "only the optical depth sigma_a * depth enters; sigma_a carries it")},
     presets=PRESETS,
+    band_separable=True,
 )
 
 __all__ = ["Params", "eval", "pdf", "sample", "components", "specular", "albedo", "MODEL", "PRESETS",

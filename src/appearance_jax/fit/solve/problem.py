@@ -68,31 +68,62 @@ class Problem:
         return self.residuals_x(self.space.x_from_z(z), data)
 
     def jacobian_z(self, z, data):
-        """d residuals_z / dz (N*B, p) by forward mode. When the model declares fields that enter f
-        only after its costly per-parameter work (``Model.jacobian_apart``, e.g. a coat's tables
-        before the base albedo multiplies them) and both they and other fields are free, their
-        columns come from a forward pass of their own: its tangents skip that work, and the other
-        pass carries only the remaining tangents (rough_plastic's Jacobian ~1.5x faster). The same
-        Jacobian to rounding either way."""
+        """d residuals_z / dz (N*B, p) by forward mode, with two savings a model may allow:
+
+        - ``Model.jacobian_apart``: fields that enter f only after the model's costly per-parameter
+          work (e.g. a base albedo multiplying a coat's finished terms). When both they and other
+          fields are free, their columns come from a forward pass of their own, whose tangents
+          skip that work (rough_plastic's Jacobian ~1.5x faster).
+        - ``Model.band_separable``: output band b depends on a band field only through its entry b.
+          Then one tangent (every entry at once) gives all of a band field's columns: entry b's
+          column is that derivative on the rows of band b and 0 elsewhere (an RGB albedo: 1
+          tangent instead of 3).
+
+        The same Jacobian to rounding either way (tests/fit/solve/test_solve.py)."""
         sp = self.space
+        n = len(sp.fields)
         apart = [i for i, f in enumerate(sp.fields) if f.name in getattr(self.model, "jacobian_apart", ())]
-        if not apart or len(apart) == len(sp.fields):
+        bands = int(data["f"].shape[-1])
+        collapse = {i for i, f in enumerate(sp.fields)
+                    if getattr(self.model, "band_separable", False) and f.spec.bands and f.size == bands > 1}
+        groups = [list(range(n))] if not apart or len(apart) == n else [[i for i in range(n) if i not in apart], apart]
+        if len(groups) == 1 and not collapse:
             return jax.jacfwd(self.residuals_z)(z, data)
         parts = sp.z_parts(z)
-        rest = [i for i in range(len(parts)) if i not in apart]
+        cols = {}
+        for group in groups:
+            cols.update(self._columns(parts, group, collapse, bands, data))
+        return jnp.concatenate([cols[i] for i in range(n)], axis=1)
 
-        def columns(group):
-            def fn(sub):
-                full = list(parts)
-                for i, v in zip(group, sub):
-                    full[i] = v
-                return self.residuals_params(sp.params_from_z_parts(full), data)
+    def _columns(self, parts, group, collapse, bands, data):
+        """{field index: its Jacobian columns (N*B, size)} of the fields ``group`` from one forward
+        pass (vmapped JVPs; the other fields' parts held, so they carry no tangent), one tangent per
+        entry, or per field for those in ``collapse`` (see :meth:`jacobian_z`)."""
+        sp = self.space
 
-            return dict(zip(group, jax.jacfwd(fn)([parts[i] for i in group])))
+        def fn(*sub):
+            full = list(parts)
+            for i, v in zip(group, sub):
+                full[i] = v
+            return self.residuals_params(sp.params_from_z_parts(full), data)
 
-        cols = {**columns(rest), **columns(apart)}
-        return jnp.concatenate([cols[i] for i in range(len(parts))], axis=1)
-
+        rows = [(g, k) for g, i in enumerate(group) for k in ([None] if i in collapse else range(sp.fields[i].size))]
+        basis = [np.zeros((len(rows), sp.fields[i].size)) for i in group]
+        for r, (g, k) in enumerate(rows):
+            basis[g][r, slice(None) if k is None else k] = 1.0
+        primals = tuple(parts[i] for i in group)
+        dt = primals[0].dtype
+        out = jax.vmap(lambda *t: jax.jvp(fn, primals, t)[1])(*(jnp.asarray(b, dt) for b in basis))  # (rows, N*B)
+        band_of_row = np.arange(out.shape[1]) % bands  # r is the ravel of (N, B)
+        result, r = {}, 0
+        for i in group:
+            if i in collapse:
+                result[i] = out[r][:, None] * jnp.asarray(band_of_row[:, None] == np.arange(bands)[None, :], dt)
+                r += 1
+            else:
+                result[i] = out[r:r + sp.fields[i].size].T
+                r += sp.fields[i].size
+        return result
 
 def _sigma_scale(metric, f, sigma, cos_i, floor):
     s = np.asarray(residual_scale(f, sigma, cos_i, metric, floor=floor))
