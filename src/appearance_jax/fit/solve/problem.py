@@ -125,6 +125,7 @@ class Problem:
                 r += sp.fields[i].size
         return result
 
+
 def _sigma_scale(metric, f, sigma, cos_i, floor):
     s = np.asarray(residual_scale(f, sigma, cos_i, metric, floor=floor))
     return np.where(np.isfinite(s) & (s > 0), 1.0 / np.where(s > 0, s, 1.0), 0.0)
