@@ -460,5 +460,4 @@ MODEL = Model(
     transmissive=True,
     presets=PRESETS,
     stochastic=True,
-    band_separable=True,
 )
