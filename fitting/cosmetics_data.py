@@ -176,6 +176,7 @@ def powell_fit(loss, prob, x0, n_valid, maxfev, *, warm=False):
     """SciPy's Powell on ``loss(x, data) / n_valid`` (x physical), each parameter bounded 1e-4 of
     its range inside the range. ``warm``: one timed call first (the loss's compile, counted as an
     evaluation). Returns dict(time, compile, evals, iterations, loss, x, message)."""
+    import jax
     import jax.numpy as jnp
     from scipy.optimize import minimize
 
@@ -188,10 +189,11 @@ def powell_fit(loss, prob, x0, n_valid, maxfev, *, warm=False):
         eps = 1e-4 * (s.hi - s.lo)
         bounds += [(s.lo + eps, s.hi - eps)] * f.size
     count = [0]
+    data = jax.device_put(prob.data)  # on the device once (build_problem's are numpy): calls move only x
 
     def objective(x):
         count[0] += 1
-        return float(loss(jnp.asarray(x, jnp.result_type(float)), prob.data)) / n_valid
+        return float(loss(jnp.asarray(x, jnp.result_type(float)), data)) / n_valid
 
     t_c = 0.0
     if warm:

@@ -163,8 +163,8 @@ class Model:
     def __post_init__(self):
         if self.kind not in ("bsdf", "phase", "bcsdf"):
             raise ValueError(f"Model.kind = {self.kind!r}: must be 'bsdf', 'phase' or 'bcsdf'")
-        names = {f.name for f in dataclasses.fields(self.Params)} if dataclasses.is_dataclass(self.Params) else None
-        unknown = [n for n in self.jacobian_apart if names is not None and n not in names]
+        names = {f.name for f in dataclasses.fields(self.Params)} if dataclasses.is_dataclass(self.Params) else set()
+        unknown = [n for n in self.jacobian_apart if n not in names]
         if unknown:
             raise ValueError(f"Model {self.name!r}: jacobian_apart names {unknown}, which are not fields of its "
                              f"Params ({', '.join(sorted(names))})")
